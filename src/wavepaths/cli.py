@@ -1,0 +1,197 @@
+"""The ``wavepaths`` command line: a thin layer over the Python API.
+
+Every subcommand turns a :class:`~wavepaths.errors.WavepathsError` into one line on
+standard error and exit status 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .errors import WavepathsError
+
+
+def _scene(args):
+    from .scene import load_scene
+
+    return load_scene(args.scene)
+
+
+def _cmd_info(args) -> int:
+    scene = _scene(args)
+    info = scene.summary()
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"scene      {info['source']}")
+    print(f"triangles  {info['triangles']}")
+    print(f"objects    {info['objects']} ({', '.join(info['object_names'])})")
+    print(f"materials  {info['materials']} ({', '.join(info['material_names'])})")
+    print(f"polygons   {info['polygons']}")
+    by = info["dihedra_by_face_count"]
+    print(f"dihedra    {info['dihedra']} (1 face: {by['1']}, 2 faces: {by['2']}, 3+ faces: {by['3+']}; "
+          f"{info['diffracting_dihedra']} can diffract)")
+    print(f"flat edges {info['skipped_flat_edges']} skipped")
+    lo, hi = info["bounds"]
+    print(f"bounds     [{lo[0]:.3f}, {lo[1]:.3f}, {lo[2]:.3f}] .. [{hi[0]:.3f}, {hi[1]:.3f}, {hi[2]:.3f}] m")
+    return 0
+
+
+def _trace_options(args):
+    from .search import TraceOptions
+
+    return TraceOptions(
+        los=not args.no_los,
+        max_reflections=args.max_reflections,
+        diffraction=not args.no_diffraction,
+        diffraction_reflections=args.diffraction_reflections,
+        lit_region=not args.no_lit_region,
+    )
+
+
+def _cmd_paths(args) -> int:
+    from .search import trace
+
+    scene = _scene(args)
+    tx = np.array(args.tx, dtype=float).reshape(-1, 3)
+    rx = np.array(args.rx, dtype=float).reshape(-1, 3)
+    paths = trace(scene, tx, rx, _trace_options(args))
+    field_cfg = _field_config(args)
+    result = None
+    if field_cfg is not None:
+        from .fields import compute_fields
+
+        result = compute_fields(scene, paths, field_cfg)
+    records = paths.records()
+    if result is not None:
+        a = result.a
+        gain = result.gain_db
+        for i, r in enumerate(records):
+            r["a"] = [float(a[i].real), float(a[i].imag)]
+            r["gain_db"] = float(gain[i])
+    receivers = []
+    for j in range(len(rx)):
+        entry = {"rx": j, "position": rx[j].tolist(), "num_paths": int(np.count_nonzero(paths.rx_index == j))}
+        if result is not None:
+            entry.update(result.receiver_summary(j))
+        receivers.append(entry)
+    if args.json:
+        out = {"scene": scene.source, "tx": tx.tolist(), "rx": rx.tolist(), "paths": records, "receivers": receivers}
+        if result is not None:
+            out["frequency_hz"] = result.frequency_hz
+        print(json.dumps(out, indent=1))
+        return 0
+    print(f"{len(records)} paths in {scene.source}")
+    header = f"{'tx':>3} {'rx':>3}  {'interactions':<34} {'length [m]':>11} {'delay [ns]':>11}"
+    if result is not None:
+        header += f" {'gain [dB]':>10}"
+    print(header)
+    for r in records:
+        kinds = "-".join({"reflection": "R", "diffraction": "D"}[k] for k in r["interactions"]) or "LOS"
+        line = f"{r['tx']:>3} {r['rx']:>3}  {kinds:<34} {r['length_m']:>11.4f} {r['delay_s'] * 1e9:>11.4f}"
+        if "gain_db" in r:
+            line += f" {r['gain_db']:>10.2f}"
+        print(line)
+    if result is not None:
+        for e in receivers:
+            print(f"rx {e['rx']}: path gain {e['path_gain_db']:.2f} dB (coherent), "
+                  f"{e['path_gain_incoherent_db']:.2f} dB (power sum)")
+    return 0
+
+
+def _field_config(args):
+    """The field settings of ``paths`` (None when the fields module is not available)."""
+    try:
+        from .fields import FieldConfig
+    except ImportError:
+        return None
+    return FieldConfig.from_cli(args)
+
+
+def _add_trace_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-reflections", type=int, default=2, help="highest order of specular paths (default 2)")
+    p.add_argument("--no-diffraction", action="store_true", help="no edge diffraction")
+    p.add_argument("--diffraction-reflections", type=int, default=1,
+                   help="reflections combined with the diffraction, before and after (default 1)")
+    p.add_argument("--no-lit-region", action="store_true", help="diffraction only in the incident shadow")
+    p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
+
+
+def _add_field_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--frequency", type=float, default=3.5e9, help="carrier frequency [Hz] (default 3.5e9)")
+    p.add_argument("--model", choices=["utd", "gtd"], default="utd", help="diffraction coefficients (default utd)")
+    p.add_argument("--compat", choices=["none", "sionna"], default="none",
+                   help="'sionna' reproduces Sionna RT 2.2's diffraction combination")
+    p.add_argument("--polarization", choices=["V", "H"], default="V", help="antenna polarisation (default V)")
+    p.add_argument("--antenna", choices=["iso", "dipole", "hw_dipole", "tr38901"], default="iso")
+    p.add_argument("--tx-power-dbm", type=float, default=0.0, help="transmit power [dBm] (default 0)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="wavepaths", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("info", help="describe a scene: triangles, polygons, dihedra")
+    p.add_argument("scene", help="built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("paths", help="list the propagation paths between transmitters and receivers")
+    p.add_argument("scene")
+    p.add_argument("--tx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"))
+    p.add_argument("--rx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"))
+    _add_trace_flags(p)
+    _add_field_flags(p)
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_cmd_paths)
+
+    for name, hook in _EXTRA_COMMANDS:
+        hook(sub)
+    return parser
+
+
+def _version() -> str:
+    from . import __version__
+
+    return f"wavepaths {__version__}"
+
+
+_EXTRA_COMMANDS: list[tuple[str, Callable]] = []
+
+
+def _register_extra() -> None:
+    """Subcommands that live in their own modules (coverage, validate, bench)."""
+    for module, name in (("wavepaths.coverage.cli", "coverage"), ("wavepaths.validation.cli", "validate"),
+                         ("wavepaths.bench.cli", "bench")):
+        try:
+            mod = __import__(module, fromlist=["add_parser"])
+        except ImportError:
+            continue
+        _EXTRA_COMMANDS.append((name, mod.add_parser))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    _register_extra()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            return int(args.func(args) or 0)
+    except WavepathsError as exc:
+        print(f"wavepaths {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

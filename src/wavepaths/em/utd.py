@@ -1,0 +1,593 @@
+"""Wedge diffraction coefficients: UTD (Kouyoumjian-Pathak), Luebbers, Keller GTD, Sionna.
+
+Conventions (``docs/conventions.md``): time factor ``exp(+jwt)``; the wedge's 0-face is at
+``phi = 0`` and its n-face at ``phi = n pi`` (exterior angle ``n pi``, ``1 < n <= 2``);
+``phi_prime`` is the direction of the source and ``phi`` that of the observer, both from
+the 0-face about the edge unit vector ``e`` (right-handed: ``t0 = n0 x e`` points into the
+0-face, ``n0`` its normal into free space); ``beta_0`` is the angle between the incident ray
+and ``e``. Soft = E parallel to the edge = ``D_s`` (``beta_0`` components); hard = ``D_h``
+(``phi`` components).
+
+The diffracted field is ``E^d = J E^i(Q) A(s) exp(-jks)`` with, for UTD and GTD,
+``J = diag(-D_s, -D_h)`` acting on ``(E_beta0', E_phi')`` -> ``(E_beta0, E_phi)``, which is
+KP's dyadic ``-b0' b0 D_s - phi' phi D_h`` with ``phi' = unit(s' x e)``,
+``b0' = s' x phi'``, ``phi = unit(e x s)``, ``b0 = s x phi`` (``s'``, ``s`` the incident and
+diffracted propagation directions). For scalar fields (soft ``u = E_z``, hard ``u = H_z``)
+this is ``u^d = D u^i(Q) A exp(-jks)``.
+
+Numerics. Each of the four terms ``cot((pi +- beta)/2n) F(kL a^{+-}(beta))`` equals
+``cot(eps/2n) F(2kL sin^2(eps/2))`` with ``eps = pi +- beta - 2 pi n N^{+-}`` in
+``[-n pi, n pi]`` (``eps = 0`` on the shadow or reflection boundary of that term). It is
+evaluated as ``sgn(eps) n sqrt(2kL) cos(eps/2n) [sinc(eps/2pi)/sinc(eps/2n pi)]
+G(2kL sin^2(eps/2))`` with ``G(x) = F(x)/sqrt(x)``, which has no cancellation and no
+0 * inf anywhere; at ``eps = 0`` exactly it is 0, the mean of the one-sided limits
+``+-n sqrt(2 pi kL) e^{j pi/4}`` (KP 1974 eq. 29 boundary limit), to pair with a GO weight
+of 1/2 exactly on the boundary.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import erfcx
+
+from wavepaths.em.fresnel import ReflectionModel, reflection_coefficients
+from wavepaths.em.materials import Material
+from wavepaths.errors import WavepathsError
+
+__all__ = [
+    "BoundaryOffsets",
+    "FaceCoefficients",
+    "WedgeCoefficients",
+    "boundary_offsets",
+    "diffraction_jones",
+    "keller_coefficients",
+    "kp_coefficients",
+    "luebbers_coefficients",
+    "luebbers_face_coefficients",
+    "seed_keller_coefficient",
+    "seed_scalar_radiance",
+    "sionna_compat_coefficients",
+    "sionna_face_coefficients",
+    "transition_function",
+]
+
+DiffractionModel = Literal["utd", "gtd", "sionna"]
+_MODELS: tuple[str, ...] = ("utd", "gtd", "sionna")
+
+Array = NDArray[np.float64]
+CArray = NDArray[np.complex128]
+
+_E_PI4 = np.exp(0.25j * np.pi)
+# Above this argument F(x) = 1 + j/(2x) - 3/(4x^2) to double precision (next term 15/(8x^3)).
+_F_ASYMPTOTIC_X = 1e8
+
+
+class WedgeCoefficients(NamedTuple):
+    """Scalar wedge diffraction coefficients ``(D_s, D_h)`` [sqrt(m)], complex arrays."""
+
+    d_s: CArray
+    d_h: CArray
+
+
+class FaceCoefficients(NamedTuple):
+    """Face reflection coefficients for the diffraction coefficient, complex arrays.
+
+    For Luebbers: ``r0_s, r0_h`` (0-face) and ``rn_s, rn_h`` (n-face), the soft ones being
+    ``r_te`` and the hard ones ``r_tm`` of :mod:`wavepaths.em.fresnel`. For the Sionna
+    compat mode the same fields hold ``r_te``/``r_tm`` at Sionna's angles.
+    """
+
+    r0_s: CArray
+    r0_h: CArray
+    rn_s: CArray
+    rn_h: CArray
+
+
+# --------------------------------------------------------------------------- transition function
+def _g(x: Array) -> CArray:
+    """G(x) = F(x)/sqrt(x) for x >= 0: e^{j pi/4} sqrt(pi) erfcx(e^{j pi/4} sqrt(x)).
+
+    Uses erfcx(z) = exp(z^2) erfc(z) with z^2 = jx, so exp(jx) erfc(z) = erfcx(z) exactly.
+    """
+    big = x > _F_ASYMPTOTIC_X
+    xs = np.where(big, 1.0, x)
+    g_small = _E_PI4 * np.sqrt(np.pi) * erfcx(_E_PI4 * np.sqrt(xs))
+    xb = np.where(big, x, 1.0)
+    g_big = (1.0 + 0.5j / xb - 0.75 / (xb * xb)) / np.sqrt(xb)
+    return np.where(big, g_big, g_small)
+
+
+def transition_function(x: ArrayLike) -> CArray:
+    """UTD transition function of Kouyoumjian & Pathak (1974), eq. (25).
+
+    ::
+
+        F(x) = 2j sqrt(x) e^{jx} int_{sqrt(x)}^inf e^{-j t^2} dt
+             = e^{j pi/4} sqrt(pi x) erfcx(e^{j pi/4} sqrt(x))
+
+    evaluated exactly with the Faddeeva function (``scipy.special.erfcx``), and for
+    ``x > 1e8`` with its asymptotic series ``1 + j/(2x) - 3/(4x^2)`` (exact in double).
+
+    Parameters
+    ----------
+    x : float or array_like, any shape
+        Argument, ``x >= 0`` (``+inf`` allowed).
+
+    Returns
+    -------
+    complex128 array, shape of ``x``
+        ``F(0) = 0``, ``F(x) -> sqrt(pi x) e^{j pi/4}`` for ``x -> 0``, ``F(inf) = 1``.
+    """
+    xa = np.asarray(x, dtype=float)
+    if np.any(np.isnan(xa)) or np.any(xa < 0):
+        raise WavepathsError("`x` must be >= 0 (and not NaN)")
+    big = xa > _F_ASYMPTOTIC_X
+    xs = np.where(big, 1.0, xa)
+    f_small = np.sqrt(xs) * _g(xs)
+    xb = np.where(big, xa, 1.0)
+    f_big = 1.0 + 0.5j / xb - 0.75 / (xb * xb)
+    return np.asarray(np.where(big, f_big, f_small), dtype=np.complex128)
+
+
+# --------------------------------------------------------------------------- shared kernels
+def _prepare(
+    phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
+    L: ArrayLike | None,
+) -> list[Array]:
+    names = ["phi", "phi_prime", "beta_0", "n", "k", "L"]
+    vals = [phi, phi_prime, beta_0, n, k, 1.0 if L is None else L]
+    arrs = [np.asarray(v, dtype=float) for v in vals]
+    for name, a in zip(names, arrs):
+        if not np.all(np.isfinite(a)):
+            raise WavepathsError(f"`{name}` must be finite")
+    if np.any(arrs[3] <= 1.0) or np.any(arrs[3] > 2.0):
+        raise WavepathsError("`n` (exterior angle / pi) must lie in (1, 2]")
+    if np.any(arrs[4] <= 0.0):
+        raise WavepathsError("`k` (wavenumber, rad/m) must be > 0")
+    if np.any(arrs[5] < 0.0):
+        raise WavepathsError("`L` (distance parameter, m) must be >= 0")
+    return list(np.broadcast_arrays(*arrs))
+
+
+def _check_floor(value: float, name: str) -> None:
+    if not (0.0 < value < 1.0):
+        raise WavepathsError(f"`{name}` must lie in (0, 1), got {value!r}")
+
+
+class BoundaryOffsets(NamedTuple):
+    """Signed angular offsets ``eps_1..eps_4`` [rad] of the four UTD terms D1..D4.
+
+    ``eps_i = 0`` exactly on the boundary of term i: D2 the incident shadow boundary
+    ``phi = phi' + pi``, D1 ``phi = phi' - pi``, D4 the 0-face reflection boundary
+    ``phi = pi - phi'``, D3 the n-face one ``phi = (2n - 1) pi - phi'``. Each lies in
+    ``[-n pi, n pi]``; near its boundary it is positive on the GO-lit side.
+    """
+
+    eps_1: Array
+    eps_2: Array
+    eps_3: Array
+    eps_4: Array
+
+
+def boundary_offsets(phi: ArrayLike, phi_prime: ArrayLike, n: ArrayLike) -> BoundaryOffsets:
+    """The offsets ``eps = pi +- beta - 2 pi n N^{+-}`` of the KP terms (KP 1974 eq. 26).
+
+    ``N^{+-} = round((beta +- pi) / (2 pi n))`` with ``beta = phi -+ phi'``. A GO
+    computation that wants to agree *bit for bit* with the diffraction coefficients on
+    which side of a boundary a point lies should test the sign of these values.
+
+    Returns
+    -------
+    BoundaryOffsets
+        Four float64 arrays of the broadcast shape.
+    """
+    p, pp, nn = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (phi, phi_prime, n)))
+    return BoundaryOffsets(*_epsilons(p, pp, nn))
+
+
+def _epsilons(phi: Array, phi_prime: Array, n: Array) -> tuple[Array, Array, Array, Array]:
+    """eps_1..eps_4 of the terms D1..D4 (zero on the boundary of that term).
+
+    D1: cot((pi+b-)/2n) F(kL a+(b-)), D2: cot((pi-b-)/2n) F(kL a-(b-)),
+    D3: cot((pi+b+)/2n) F(kL a+(b+)), D4: cot((pi-b+)/2n) F(kL a-(b+)); b-+ = phi -+ phi'.
+    N+- = round((b +- pi)/(2 pi n)) (KP eq. 26). D2 vanishes on the incident shadow
+    boundary phi = phi' + pi, D1 on phi = phi' - pi, D4 on the 0-face reflection boundary
+    phi = pi - phi', D3 on the n-face one phi = (2n-1) pi - phi'.
+    """
+    two_pi_n = 2.0 * np.pi * n
+
+    def eps_plus(b: Array) -> Array:
+        return (np.pi + b) - two_pi_n * np.round((b + np.pi) / two_pi_n)
+
+    def eps_minus(b: Array) -> Array:
+        return (np.pi - b) + two_pi_n * np.round((b - np.pi) / two_pi_n)
+
+    bm = phi - phi_prime
+    bp = phi + phi_prime
+    return eps_plus(bm), eps_minus(bm), eps_plus(bp), eps_minus(bp)
+
+
+def _cot_f(eps: Array, n: Array, kl: Array) -> CArray:
+    """cot(eps/2n) F(2 kL sin^2(eps/2)) for |eps| <= n pi, finite everywhere (0 at eps=0)."""
+    ratio = n * np.sinc(eps / (2.0 * np.pi)) / np.sinc(eps / (2.0 * np.pi * n))
+    x = 2.0 * kl * np.sin(0.5 * eps) ** 2
+    return np.sign(eps) * np.sqrt(2.0 * kl) * np.cos(eps / (2.0 * n)) * ratio * _g(x)
+
+
+def _cot_floored(eps: Array, n: Array, floor: float) -> Array:
+    """cot(eps/2n) with |sin(eps/2n)| floored (GTD: huge but finite on a boundary)."""
+    s = np.sin(eps / (2.0 * n))
+    s = np.where(np.abs(s) < floor, np.where(s < 0, -floor, floor), s)
+    return np.cos(eps / (2.0 * n)) / s
+
+
+def _prefactor(n: Array, k: Array, beta_0: Array, sin_beta_0_floor: float) -> CArray:
+    """-e^{-j pi/4} / (2 n sqrt(2 pi k) sin beta_0), KP eq. (23), sin beta_0 floored."""
+    sb = np.maximum(np.abs(np.sin(beta_0)), sin_beta_0_floor)
+    return -np.exp(-0.25j * np.pi) / (2.0 * n * np.sqrt(2.0 * np.pi * k) * sb)
+
+
+def _four_terms(
+    phi: Array, phi_prime: Array, beta_0: Array, n: Array, k: Array, L: Array,
+    sin_beta_0_floor: float, gtd_floor: float | None,
+) -> tuple[CArray, CArray, CArray, CArray]:
+    """pref * (D1, D2, D3, D4); with gtd_floor the F -> 1 (Keller) limit."""
+    pref = _prefactor(n, k, beta_0, sin_beta_0_floor)
+    eps = _epsilons(phi, phi_prime, n)
+    if gtd_floor is None:
+        kl = k * L
+        t = [_cot_f(e, n, kl) for e in eps]
+    else:
+        t = [_cot_floored(e, n, gtd_floor) for e in eps]
+    return pref * t[0], pref * t[1], pref * t[2], pref * t[3]
+
+
+# --------------------------------------------------------------------------- UTD / Luebbers
+def luebbers_coefficients(
+    phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
+    L: ArrayLike, r0_s: ArrayLike, r0_h: ArrayLike, rn_s: ArrayLike, rn_h: ArrayLike,
+    *, sin_beta_0_floor: float = 1e-6,
+) -> WedgeCoefficients:
+    """Luebbers (IEEE TAP 32(1):70-76, 1984) heuristic UTD coefficient, ITU-R P.526 wedge form.
+
+    ::
+
+        D = -e^{-j pi/4}/(2n sqrt(2 pi k) sin b0) [D1 + D2 + R0 D4 + Rn D3]
+
+    with the four KP terms (see :func:`kp_coefficients`). ``R = -1`` (soft) / ``+1`` (hard)
+    is KP exactly. ``r*_s`` multiply ``D_s`` and ``r*_h`` ``D_h``; in this package's Jones
+    convention (``e_p = e_s x k``, see :mod:`wavepaths.em.fresnel`) these are ``r_te`` and
+    ``r_tm`` *without* a sign change: PEC gives ``(-1, +1)``. A convention in which a PEC
+    has ``r_parallel = -1`` would need ``R_h = -r_parallel``.
+    Use :func:`luebbers_face_coefficients` for Luebbers' angles.
+
+    Parameters
+    ----------
+    phi, phi_prime : array_like [rad]
+        Observer and source directions from the 0-face, in ``[0, n pi]``.
+    beta_0 : array_like [rad]
+        Angle between incident ray and edge; ``|sin beta_0|`` is floored at
+        ``sin_beta_0_floor`` (grazing incidence along the edge, where D diverges).
+    n : array_like
+        Exterior angle / pi, in ``(1, 2]``.
+    k : array_like [rad/m]
+        Wavenumber, > 0.
+    L : array_like [m]
+        Distance parameter (KP Table; plane wave ``s sin^2 beta_0``), >= 0.
+    r0_s, r0_h, rn_s, rn_h : complex array_like
+        Face reflection coefficients (0-face at D4's reflection boundary, n-face at D3's).
+    sin_beta_0_floor : float
+        Floor for ``|sin beta_0|`` (default 1e-6: D is at most ~1e6 times its broadside value).
+
+    Returns
+    -------
+    WedgeCoefficients
+        ``(D_s, D_h)`` [sqrt(m)], complex128 of the broadcast shape; finite for finite input.
+    """
+    _check_floor(sin_beta_0_floor, "sin_beta_0_floor")
+    p, pp, b0, nn, kk, ll = _prepare(phi, phi_prime, beta_0, n, k, L)
+    d1, d2, d3, d4 = _four_terms(p, pp, b0, nn, kk, ll, sin_beta_0_floor, None)
+    rs = [np.asarray(r, dtype=np.complex128) for r in (r0_s, r0_h, rn_s, rn_h)]
+    base = d1 + d2
+    return WedgeCoefficients(base + rs[0] * d4 + rs[2] * d3, base + rs[1] * d4 + rs[3] * d3)
+
+
+def kp_coefficients(
+    phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
+    L: ArrayLike, *, sin_beta_0_floor: float = 1e-6,
+) -> WedgeCoefficients:
+    """Kouyoumjian & Pathak (Proc. IEEE 62(11):1448-1461, 1974) PEC wedge, eqs. (23)-(27).
+
+    ::
+
+        D_{s,h} = -e^{-j pi/4} / (2n sqrt(2 pi k) sin b0) *
+                  [ cot((pi+b-)/2n) F(kL a+(b-)) + cot((pi-b-)/2n) F(kL a-(b-))
+                    -+ { cot((pi+b+)/2n) F(kL a+(b+)) + cot((pi-b+)/2n) F(kL a-(b+)) } ]
+        b-+ = phi -+ phi',  a+-(b) = 2 cos^2((2 n pi N+- - b)/2),  N+- = round((b +- pi)/(2 pi n))
+
+    (upper sign soft). Exactly on a shadow/reflection boundary the singular term takes the
+    mean of its one-sided limits (0); see the module docstring. Parameters and returns as
+    :func:`luebbers_coefficients` (which this is, with ``R = -1`` soft, ``+1`` hard).
+    """
+    return luebbers_coefficients(
+        phi, phi_prime, beta_0, n, k, L, -1.0, 1.0, -1.0, 1.0, sin_beta_0_floor=sin_beta_0_floor
+    )
+
+
+def luebbers_face_coefficients(
+    material_0: Material, material_n: Material, frequency_hz: float, phi: ArrayLike,
+    phi_prime: ArrayLike, n: ArrayLike, model: ReflectionModel = "half_space",
+    *, beta_0: ArrayLike = np.pi / 2,
+) -> FaceCoefficients:
+    """Face reflection coefficients at Luebbers' angles (ITU-R P.526 wedge section).
+
+    ``R0`` at grazing angle ``phi'`` on the 0-face (``cos theta = sin b0 |sin phi'|``) and
+    ``Rn`` at grazing angle ``n pi - phi`` on the n-face (``cos theta = sin b0 |sin(n pi -
+    phi)|``, the observer side). ``r_te`` goes with ``D_s`` and ``r_tm`` with ``D_h``, no sign
+    change (PEC -> ``(-1, +1)``, exactly KP). With the default ``beta_0 = pi/2`` this is the
+    2-D form of Luebbers / P.526; a ``beta_0`` uses the true 3-D angle of incidence on the
+    face. Note: unlike KP, the result is not symmetric in ``phi <-> phi'``.
+
+    Returns
+    -------
+    FaceCoefficients
+        ``(r0_s, r0_h, rn_s, rn_h)``, complex128 of the broadcast shape.
+    """
+    p, pp, nn, b0 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (phi, phi_prime, n, beta_0)))
+    sb = np.abs(np.sin(b0))
+    c0 = sb * np.abs(np.sin(pp))
+    cn = sb * np.abs(np.sin(nn * np.pi - p))
+    r0 = reflection_coefficients(material_0, frequency_hz, c0, model)
+    rn = reflection_coefficients(material_n, frequency_hz, cn, model)
+    return FaceCoefficients(r0.r_te, r0.r_tm, rn.r_te, rn.r_tm)
+
+
+# --------------------------------------------------------------------------- GTD
+def keller_coefficients(
+    phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
+    *, sin_beta_0_floor: float = 1e-6, denominator_floor: float = 1e-12,
+) -> WedgeCoefficients:
+    """Keller's GTD PEC wedge coefficient (JOSA 52:116, 1962), the F -> 1 limit of KP.
+
+    ::
+
+        D_{s,h} = e^{-j pi/4} sin(pi/n) / (n sqrt(2 pi k) sin b0) *
+                  [ 1/(cos(pi/n) - cos((phi-phi')/n)) -+ 1/(cos(pi/n) - cos((phi+phi')/n)) ]
+
+    It diverges on the shadow and reflection boundaries: there a denominator smaller than
+    ``denominator_floor`` in magnitude is replaced by ``+-denominator_floor``, so the result
+    is huge (~1/denominator_floor) but finite. Vanishes for ``n = 1``.
+
+    Returns
+    -------
+    WedgeCoefficients
+        ``(D_s, D_h)`` [sqrt(m)], complex128 of the broadcast shape.
+    """
+    _check_floor(sin_beta_0_floor, "sin_beta_0_floor")
+    _check_floor(denominator_floor, "denominator_floor")
+    p, pp, b0, nn, kk, _ = _prepare(phi, phi_prime, beta_0, n, k, None)
+    sb = np.maximum(np.abs(np.sin(b0)), sin_beta_0_floor)
+    pref = np.exp(-0.25j * np.pi) * np.sin(np.pi / nn) / (nn * np.sqrt(2.0 * np.pi * kk) * sb)
+
+    def inv(beta: Array) -> Array:
+        den = np.cos(np.pi / nn) - np.cos(beta / nn)
+        den = np.where(np.abs(den) < denominator_floor, np.where(den < 0, -denominator_floor, denominator_floor), den)
+        return 1.0 / den
+
+    a, b = inv(p - pp), inv(p + pp)
+    return WedgeCoefficients(pref * (a - b), pref * (a + b))
+
+
+def seed_keller_coefficient(
+    wavelength: ArrayLike, n: ArrayLike, beta: ArrayLike, delta: ArrayLike, alpha: ArrayLike,
+    C: ArrayLike,
+) -> Array:
+    """The seed paper's real GTD coefficient, exactly as written in its section 2.1.
+
+    Aveneau & Meriaux, "Rendering polygonal scenes with diffraction account" (seed 000)::
+
+        D = sqrt(lambda) cos(pi/4) sin(pi/n) / (2 n pi sin beta) *
+            [ 1/(cos(pi/n) - cos((delta - alpha)/n)) + C / (cos(pi/n) - cos((delta + alpha + pi)/n)) ]
+
+    ``delta``, ``alpha``: diffracted and incident directions measured from the *normal* of
+    the incident face, so ``delta = phi - pi/2``, ``alpha = phi' - pi/2``; ``C = -1`` is
+    Keller's soft and ``C = +1`` his hard coefficient. The result equals
+    ``Re(e^{j pi/4} D_Keller) / sqrt(2)``: Keller's value without its ``e^{-j pi/4}`` phase
+    and a factor ``1/sqrt(2)`` smaller in magnitude. No floor: it is infinite on boundaries.
+    """
+    lam, nn, b, de, al, c = (np.asarray(v, dtype=float) for v in (wavelength, n, beta, delta, alpha, C))
+    with np.errstate(divide="ignore"):
+        pref = np.sqrt(lam) * np.cos(np.pi / 4) * np.sin(np.pi / nn) / (2 * nn * np.pi * np.sin(b))
+        t1 = 1.0 / (np.cos(np.pi / nn) - np.cos((de - al) / nn))
+        t2 = c / (np.cos(np.pi / nn) - np.cos((de + al + np.pi) / nn))
+    return np.asarray(pref * (t1 + t2))
+
+
+def seed_scalar_radiance(
+    L_inc: ArrayLike, wavelength: ArrayLike, n: ArrayLike, beta: ArrayLike, delta: ArrayLike,
+    alpha: ArrayLike,
+) -> Array:
+    """The seed paper's unpolarised diffracted radiance, exactly as written (section 2.1).
+
+    ::
+
+        L_dif = L_inc lambda ( cos(pi/4) sin(pi/n) / (n pi sin beta (cos(pi/n) - cos((delta-alpha)/n))) )^2
+
+    This is ``4 L_inc D_1^2`` with ``D_1`` the first (incident-boundary) term of
+    :func:`seed_keller_coefficient`, i.e. ``2 L_inc |Keller's first term|^2``; the
+    polarisation average of Keller's coefficients would be ``|A|^2 + |B|^2`` (first and
+    second terms): the seed drops ``B`` and doubles ``|A|^2``.
+    """
+    li, lam, nn, b, de, al = (np.asarray(v, dtype=float) for v in (L_inc, wavelength, n, beta, delta, alpha))
+    with np.errstate(divide="ignore"):
+        x = np.cos(np.pi / 4) * np.sin(np.pi / nn) / (
+            nn * np.pi * np.sin(b) * (np.cos(np.pi / nn) - np.cos((de - al) / nn))
+        )
+    return np.asarray(li * lam * x**2)
+
+
+# --------------------------------------------------------------------------- Sionna RT 2.2 compat
+def sionna_face_coefficients(
+    material: Material, frequency_hz: float, phi_prime: ArrayLike, beta_0: ArrayLike,
+    n: ArrayLike, *, scattering_coefficient: float = 0.0,
+) -> FaceCoefficients:
+    """Face coefficients as Sionna RT 2.2 ``_diffraction_matrix`` computes them.
+
+    Single-layer slab (P.2040 eqs. 43-44, ``material.thickness_m``) of the one material for
+    both faces, both at the *incident* direction: ``cos theta0 = |k_i . n0| = sin b0 |sin
+    phi'|`` and ``cos thetan = |k_i . nn| = sin b0 |sin(n pi - phi')|``, all scaled by
+    ``sqrt(1 - S^2)`` (``S`` the scattering coefficient). Returned in the fields
+    ``(r0_s, r0_h, rn_s, rn_h)`` = ``(r_te, r_tm)`` of each face.
+    """
+    if not 0.0 <= scattering_coefficient <= 1.0:
+        raise WavepathsError("`scattering_coefficient` must lie in [0, 1]")
+    pp, b0, nn = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (phi_prime, beta_0, n)))
+    sb = np.abs(np.sin(b0))
+    red = np.sqrt(1.0 - scattering_coefficient**2)
+    r0 = reflection_coefficients(material, frequency_hz, sb * np.abs(np.sin(pp)), "slab")
+    rn = reflection_coefficients(material, frequency_hz, sb * np.abs(np.sin(nn * np.pi - pp)), "slab")
+    return FaceCoefficients(red * r0.r_te, red * r0.r_tm, red * rn.r_te, red * rn.r_tm)
+
+
+def _face_reflection_matrix(
+    k_i: Array, b_in: Array, p_in: Array, normal: Array, psi_r: Array, sb: Array, cb: Array,
+    r_te: CArray, r_tm: CArray,
+) -> CArray:
+    """Reflection off a face in edge-fixed bases: (E_b0', E_phi') -> (E_b_sb, E_phi_sb).
+
+    The reflected wave propagates along k_r = (sb cos psi_r, sb sin psi_r, cb); its basis is
+    phi_sb = (-sin psi_r, cos psi_r, 0), b_sb = k_r x phi_sb. The operator is
+    E -> r_te (E.e_s) e_s + r_tm (E.p_i) p_r with e_s = unit(k_i x normal), p = k x e_s.
+    """
+    e_s = np.cross(k_i, normal)
+    norm = np.linalg.norm(e_s, axis=-1, keepdims=True)
+    degenerate = norm < 1e-12  # normal incidence on the face: any e_s perpendicular to k_i
+    z = np.zeros_like(e_s)
+    z[..., 2] = 1.0
+    e_s = np.where(degenerate, z, e_s / np.where(degenerate, 1.0, norm))
+    k_r = np.stack([sb * np.cos(psi_r), sb * np.sin(psi_r), cb], axis=-1)
+    phi_sb = np.stack([-np.sin(psi_r), np.cos(psi_r), np.zeros_like(psi_r)], axis=-1)
+    b_sb = np.cross(k_r, phi_sb)
+    p_i = np.cross(k_i, e_s)
+    p_r = np.cross(k_r, e_s)
+
+    def dot(a: Array, b: Array) -> Array:
+        return np.sum(a * b, axis=-1)
+
+    out = np.empty(psi_r.shape + (2, 2), dtype=np.complex128)
+    for col, v in enumerate((b_in, p_in)):
+        vs, vp = dot(v, e_s), dot(v, p_i)
+        for row, w in enumerate((b_sb, phi_sb)):
+            out[..., row, col] = r_te * vs * dot(e_s, w) + r_tm * vp * dot(p_r, w)
+    return out
+
+
+def sionna_compat_coefficients(
+    phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
+    L: ArrayLike, r0_te: ArrayLike = -1.0, r0_tm: ArrayLike = 1.0, rn_te: ArrayLike = -1.0,
+    rn_tm: ArrayLike = 1.0, *, sin_beta_0_floor: float = 1e-6,
+) -> CArray:
+    """Sionna RT 2.2's diffraction Jones matrix (``RadioMaterial._diffraction_matrix``).
+
+    A compat mode, re-implemented from Sionna's formula (see ``docs/sionna-diffraction.md``)::
+
+        J = R0 (d1 - d4) + Rn (d2 - d3)
+
+    with ``d_i`` the KP terms times KP's prefactor and ``R0``, ``Rn`` the 2x2 reflection
+    matrices of the 0- and n-face for the *incident* ray, mapping the incident edge-fixed
+    components to those of the reflected wave in its own edge-fixed basis (the basis of the
+    reflection shadow boundary), which Sionna uses unchanged as the diffracted basis.
+    ``Rn = -I`` whenever ``n pi > pi + phi'`` (n-face not lit), whatever the material. For a
+    PEC, ``R0 = Rn = diag(+1, -1)`` in ``(b, phi)`` order, so when both faces are lit
+    ``J = diag(D_s, -D_s)``: KP's ``D_s`` with the opposite sign of KP's dyadic for the
+    soft component and ``D_s`` in place of ``D_h`` for the hard one.
+
+    Bases: input ``(E_b0', E_phi')``, output ``(E_b0, E_phi)`` with ``phi' = unit(s' x e)``,
+    ``b0' = s' x phi'``, ``phi = unit(e x s)``, ``b0 = s x phi`` -- the same unit vectors as
+    Sionna's ``phi_hat_prime``, ``k_i x phi_hat_prime``, ``phi_hat``, ``k_o x phi_hat``.
+    Sionna orders them ``(phi, b0)``, so ``J_ours = P J_sionna P`` with ``P = [[0,1],[1,0]]``.
+    Differences that remain: double precision and the exact ``F`` instead of Sionna's
+    float32 Boersma Fresnel integrals (relative ~1e-5), and exactly on a boundary the mean
+    of the one-sided limits instead of Sionna's ``sin psi >= 0`` side.
+
+    Parameters
+    ----------
+    phi, phi_prime, beta_0, n, k, L : array_like
+        As :func:`kp_coefficients`; ``beta_0`` in ``[0, pi]`` is the angle of the incident
+        propagation direction to the edge.
+    r0_te, r0_tm, rn_te, rn_tm : complex array_like
+        Slab TE/TM coefficients of the faces at Sionna's angles
+        (:func:`sionna_face_coefficients`); defaults are PEC.
+
+    Returns
+    -------
+    (..., 2, 2) complex128
+    """
+    _check_floor(sin_beta_0_floor, "sin_beta_0_floor")
+    p, pp, b0, nn, kk, ll = _prepare(phi, phi_prime, beta_0, n, k, L)
+    d1, d2, d3, d4 = _four_terms(p, pp, b0, nn, kk, ll, sin_beta_0_floor, None)
+    shape = p.shape
+    rr = [np.broadcast_to(np.asarray(r, dtype=np.complex128), shape) for r in (r0_te, r0_tm, rn_te, rn_tm)]
+    sb, cb = np.sin(b0), np.cos(b0)
+    k_i = np.stack([-sb * np.cos(pp), -sb * np.sin(pp), cb], axis=-1)
+    phi_in = np.stack([-np.sin(pp), np.cos(pp), np.zeros(shape)], axis=-1)
+    b_in = np.cross(k_i, phi_in)
+    n0 = np.broadcast_to(np.array([0.0, 1.0, 0.0]), shape + (3,))
+    nnv = np.stack([np.sin(nn * np.pi), -np.cos(nn * np.pi), np.zeros(shape)], axis=-1)
+    r0m = _face_reflection_matrix(k_i, b_in, phi_in, n0, np.pi - pp, sb, cb, rr[0], rr[1])
+    rnm = _face_reflection_matrix(k_i, b_in, phi_in, nnv, (2 * nn - 1) * np.pi - pp, sb, cb, rr[2], rr[3])
+    unlit_n = nn * np.pi > np.pi + pp
+    minus_i = np.broadcast_to(-np.eye(2, dtype=np.complex128), rnm.shape)
+    rnm = np.where(unlit_n[..., None, None], minus_i, rnm)
+    return r0m * (d1 - d4)[..., None, None] + rnm * (d2 - d3)[..., None, None]
+
+
+# --------------------------------------------------------------------------- Jones matrix
+def diffraction_jones(
+    phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
+    L: ArrayLike, model: DiffractionModel, r0_s: ArrayLike = -1.0, r0_h: ArrayLike = 1.0,
+    rn_s: ArrayLike = -1.0, rn_h: ArrayLike = 1.0, *, sin_beta_0_floor: float = 1e-6,
+    gtd_floor: float = 1e-12,
+) -> CArray:
+    """Edge diffraction Jones matrix ``(E_b0', E_phi')`` at the edge -> ``(E_b0, E_phi)``.
+
+    The diffracted field is ``E^d(s) = J E^i(Q) A(s) exp(-jks)`` (spreading ``A`` and phase
+    applied by the caller). Bases as in the module docstring.
+
+    * ``"utd"``: ``diag(-D_s, -D_h)`` with Luebbers' coefficients
+      (:func:`luebbers_coefficients`); the default ``R``'s (``-1``, ``+1``) give KP exactly.
+    * ``"gtd"``: the same with ``F = 1`` (Keller's non-uniform limit, with the ``R``'s);
+      huge but finite on the boundaries (``|sin|`` floored at ``gtd_floor``).
+    * ``"sionna"``: :func:`sionna_compat_coefficients`, the ``r*_s``/``r*_h`` being the
+      TE/TM slab coefficients at Sionna's angles; a full (generally non-diagonal) matrix.
+
+    Returns
+    -------
+    (..., 2, 2) complex128
+    """
+    if model not in _MODELS:
+        raise WavepathsError(f"`model` must be one of {_MODELS}, got {model!r}")
+    if model == "sionna":
+        return sionna_compat_coefficients(
+            phi, phi_prime, beta_0, n, k, L, r0_s, r0_h, rn_s, rn_h, sin_beta_0_floor=sin_beta_0_floor
+        )
+    if model == "utd":
+        d_s, d_h = luebbers_coefficients(
+            phi, phi_prime, beta_0, n, k, L, r0_s, r0_h, rn_s, rn_h, sin_beta_0_floor=sin_beta_0_floor
+        )
+    else:
+        _check_floor(sin_beta_0_floor, "sin_beta_0_floor")
+        _check_floor(gtd_floor, "gtd_floor")
+        p, pp, b0, nn, kk, ll = _prepare(phi, phi_prime, beta_0, n, k, L)
+        d1, d2, d3, d4 = _four_terms(p, pp, b0, nn, kk, ll, sin_beta_0_floor, gtd_floor)
+        rs = [np.asarray(r, dtype=np.complex128) for r in (r0_s, r0_h, rn_s, rn_h)]
+        d_s = d1 + d2 + rs[0] * d4 + rs[2] * d3
+        d_h = d1 + d2 + rs[1] * d4 + rs[3] * d3
+    d_s, d_h = np.broadcast_arrays(d_s, d_h)
+    out = np.zeros(d_s.shape + (2, 2), dtype=np.complex128)
+    out[..., 0, 0] = -d_s
+    out[..., 1, 1] = -d_h
+    return out

@@ -1,0 +1,280 @@
+"""The scene: welded triangles with their objects and materials, grouped into polygons.
+
+A :class:`Scene` is built once per scene file and shared, read-only, by every later
+stage: the dihedra (:mod:`wavepaths.topology`), the ray caster
+(:mod:`wavepaths.raycast`) and the path search. Geometry is float64 throughout.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..em.materials import Material
+from ..errors import SceneError
+from .mesh_topology import EdgeIncidence, coplanar_components, edge_incidence, triangle_normals
+from .tolerances import SceneTolerances
+from .weld import degenerate_triangles, weld_vertices
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..raycast import RayCaster
+    from ..topology.dihedra import Dihedra
+
+
+class WavepathsWarning(UserWarning):
+    """Something was dropped or adjusted, and the user should know (counted in the text)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A polygonal scene.
+
+    Attributes
+    ----------
+    vertices : (v, 3) float64
+        Welded vertex positions [m], in the coordinates of the file.
+    triangles : (f, 3) int64
+        Vertex indices of each triangle.
+    triangle_object : (f,) int64
+        Index into ``object_names`` of each triangle.
+    triangle_material : (f,) int64
+        Index into ``materials`` of each triangle.
+    object_names : tuple of str
+    materials : tuple of Material
+    normals : (f, 3) float64
+        Unit triangle normals (right-hand rule on the vertex order).
+    areas : (f,) float64
+        Triangle areas [m^2].
+    incidence : EdgeIncidence
+        Unique edges and the triangles on each.
+    triangle_polygon : (f,) int64
+        Polygon of each triangle: adjacent coplanar triangles of one object and material.
+    polygon_normal : (p, 3) float64
+        Unit normal of each polygon (area-weighted, oriented like its first triangle).
+    polygon_offset : (p,) float64
+        Plane offset: points ``x`` of polygon ``i`` satisfy ``polygon_normal[i] @ x == polygon_offset[i]``.
+    polygon_object, polygon_material : (p,) int64
+    polygon_tri_ptr : (p + 1,) int64
+        CSR pointer into ``polygon_tris``.
+    polygon_tris : (f,) int64
+        Triangles grouped by polygon.
+    tolerances : SceneTolerances
+    source : str
+        File path or built-in name the scene came from.
+    dropped_degenerate : int
+        Zero-area triangles dropped on load.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    triangle_object: np.ndarray
+    triangle_material: np.ndarray
+    object_names: tuple[str, ...]
+    materials: tuple[Material, ...]
+    normals: np.ndarray
+    areas: np.ndarray
+    incidence: EdgeIncidence
+    triangle_polygon: np.ndarray
+    polygon_normal: np.ndarray
+    polygon_offset: np.ndarray
+    polygon_object: np.ndarray
+    polygon_material: np.ndarray
+    polygon_tri_ptr: np.ndarray
+    polygon_tris: np.ndarray
+    tolerances: SceneTolerances = field(default_factory=SceneTolerances)
+    source: str = ""
+    dropped_degenerate: int = 0
+
+    # ---- sizes ---------------------------------------------------------------------
+    @property
+    def num_triangles(self) -> int:
+        return len(self.triangles)
+
+    @property
+    def num_polygons(self) -> int:
+        return len(self.polygon_normal)
+
+    @functools.cached_property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64: minimum and maximum corner [m]."""
+        used = self.vertices[np.unique(self.triangles)]
+        return np.stack([used.min(axis=0), used.max(axis=0)])
+
+    @functools.cached_property
+    def center(self) -> np.ndarray:
+        """(3,) float64: centre of the bounding box [m]; the origin of the float32 ray caster."""
+        return self.bounds.mean(axis=0)
+
+    @functools.cached_property
+    def diagonal(self) -> float:
+        """Length of the bounding-box diagonal [m], the scale of every tolerance."""
+        return float(max(np.linalg.norm(self.bounds[1] - self.bounds[0]), 1e-9))
+
+    @functools.cached_property
+    def triangle_dual(self) -> np.ndarray:
+        """(f, 2, 3) float64: barycentric maps of the triangles (point-in-polygon tests)."""
+        from .polygon_query import triangle_dual_basis
+
+        return triangle_dual_basis(self.vertices, self.triangles)
+
+    def length_tolerance(self, relative: float) -> float:
+        """A relative tolerance of :class:`SceneTolerances` in metres."""
+        return relative * self.diagonal
+
+    # ---- later stages, built on first use and cached ---------------------------------
+    @functools.cached_property
+    def dihedra(self) -> "Dihedra":
+        """The scene's dihedra (seed §3.2), built on first use."""
+        from ..topology.dihedra import build_dihedra
+
+        return build_dihedra(self)
+
+    @functools.cached_property
+    def raycaster(self) -> "RayCaster":
+        """Batched segment-occlusion queries (Embree, float32 on recentred coordinates)."""
+        from ..raycast import default_raycaster
+
+        return default_raycaster(self)
+
+    def polygon_triangles(self, polygon: int) -> np.ndarray:
+        """Triangle indices of ``polygon``."""
+        return self.polygon_tris[self.polygon_tri_ptr[polygon] : self.polygon_tri_ptr[polygon + 1]]
+
+    def summary(self) -> dict:
+        """The numbers ``wavepaths info`` prints (see :func:`wavepaths.scene.info.scene_info`)."""
+        from .info import scene_info
+
+        return scene_info(self)
+
+
+def build_scene(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    triangle_object: np.ndarray,
+    triangle_material: np.ndarray,
+    object_names: tuple[str, ...] | list[str],
+    materials: tuple[Material, ...] | list[Material],
+    *,
+    source: str = "",
+    tolerances: SceneTolerances | None = None,
+) -> Scene:
+    """Weld, clean and group raw triangles into a :class:`Scene`.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float
+        Vertex positions [m]. Must be finite.
+    triangles : (f, 3) int
+        Vertex indices.
+    triangle_object, triangle_material : (f,) int
+        Object and material index of each triangle.
+    object_names, materials : sequences
+        Indexed by the two arrays above.
+    source : str
+        Where the scene came from, for messages.
+    tolerances : SceneTolerances, optional
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneError
+        No triangles, non-finite coordinates, or indices out of range.
+    """
+    tol = tolerances or SceneTolerances()
+    where = f"{source}: " if source else ""
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    triangle_object = np.asarray(triangle_object, dtype=np.int64).reshape(-1)
+    triangle_material = np.asarray(triangle_material, dtype=np.int64).reshape(-1)
+    if len(triangles) == 0:
+        raise SceneError(f"{where}the mesh has no faces")
+    if not np.isfinite(vertices).all():
+        bad = int((~np.isfinite(vertices).all(axis=1)).sum())
+        raise SceneError(f"{where}{bad} vertices have NaN or infinite coordinates")
+    if triangles.min() < 0 or triangles.max() >= len(vertices):
+        raise SceneError(f"{where}a face refers to a vertex that does not exist")
+    if len(triangle_object) != len(triangles) or len(triangle_material) != len(triangles):
+        raise SceneError(f"{where}object and material ids must have one entry per triangle")
+
+    used = vertices[np.unique(triangles)]
+    diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))) or 1.0
+    welded, index = weld_vertices(vertices, tol.weld * diagonal)
+    triangles = index[triangles]
+    bad = degenerate_triangles(welded, triangles, (tol.weld * diagonal) ** 2)
+    dropped = int(bad.sum())
+    if dropped:
+        warnings.warn(f"{where}dropped {dropped} zero-area triangle(s)", WavepathsWarning, stacklevel=2)
+        triangles = triangles[~bad]
+        triangle_object = triangle_object[~bad]
+        triangle_material = triangle_material[~bad]
+    if len(triangles) == 0:
+        raise SceneError(f"{where}the mesh has no faces with non-zero area")
+
+    normals, areas = triangle_normals(welded, triangles)
+    incidence = edge_incidence(triangles)
+    group = triangle_object * (int(triangle_material.max()) + 1) + triangle_material
+    labels = coplanar_components(incidence, normals, group, np.cos(tol.coplanar_angle))
+    p = int(labels.max()) + 1
+
+    order = np.argsort(labels, kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(labels, minlength=p))]).astype(np.int64)
+    first_tri = order[ptr[:-1]]
+    # orient each triangle's normal like its polygon's first triangle, then area-weight
+    sign = np.sign(np.einsum("ij,ij->i", normals, normals[first_tri[labels]]))
+    sign[sign == 0] = 1.0
+    acc = np.zeros((p, 3))
+    np.add.at(acc, labels, normals * (sign * areas)[:, None])
+    poly_normal = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    centroid = welded[triangles].mean(axis=1)
+    acc_d = np.zeros(p)
+    np.add.at(acc_d, labels, areas * np.einsum("ij,ij->i", centroid, poly_normal[labels]))
+    poly_offset = acc_d / np.bincount(labels, weights=areas, minlength=p)
+
+    return Scene(
+        vertices=welded,
+        triangles=triangles,
+        triangle_object=triangle_object,
+        triangle_material=triangle_material,
+        object_names=tuple(object_names),
+        materials=tuple(materials),
+        normals=normals,
+        areas=areas,
+        incidence=incidence,
+        triangle_polygon=labels,
+        polygon_normal=poly_normal,
+        polygon_offset=poly_offset,
+        polygon_object=triangle_object[first_tri],
+        polygon_material=triangle_material[first_tri],
+        polygon_tri_ptr=ptr,
+        polygon_tris=order.astype(np.int64),
+        tolerances=tol,
+        source=source,
+        dropped_degenerate=dropped,
+    )
+
+
+def transformed(scene: Scene, rotation: np.ndarray | None = None, translation: np.ndarray | None = None) -> Scene:
+    """The same scene moved rigidly: ``x -> rotation @ x + translation``.
+
+    Used by the invariance tests (a scene moved to 1e6 m and rotated must give the same
+    paths and fields).
+    """
+    r = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+    t = np.zeros(3) if translation is None else np.asarray(translation, dtype=np.float64)
+    return build_scene(
+        scene.vertices @ r.T + t,
+        scene.triangles,
+        scene.triangle_object,
+        scene.triangle_material,
+        scene.object_names,
+        scene.materials,
+        source=scene.source,
+        tolerances=scene.tolerances,
+    )

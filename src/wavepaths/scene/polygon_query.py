@@ -1,0 +1,118 @@
+"""Point-in-polygon and plane queries on a scene's polygons, vectorised over points."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import Scene
+
+
+def points_in_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, eps: float) -> np.ndarray:
+    """Whether each point lies in its triangle (closed, barycentric margin ``eps``).
+
+    The point is assumed to lie in (or very near) the triangle's plane; it is
+    projected onto the plane by the barycentric solve.
+
+    Parameters
+    ----------
+    points, a, b, c : (k, 3) float64
+    eps : float
+        Relative barycentric margin (1e-9 accepts points on an edge shared by two
+        triangles of one polygon despite rounding).
+
+    Returns
+    -------
+    (k,) bool
+    """
+    v0 = b - a
+    v1 = c - a
+    v2 = points - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    den = np.where(den > 0, den, np.inf)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    u = 1.0 - v - w
+    return (u >= -eps) & (v >= -eps) & (w >= -eps)
+
+
+def triangle_dual_basis(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Per-triangle map from a point in its plane to barycentric coordinates.
+
+    With ``e1 = b - a``, ``e2 = c - a`` and Gram matrix ``G``, the rows of
+    ``M = G^-1 [e1; e2]`` give ``(v, w) = M (p - a)`` and ``u = 1 - v - w``.
+
+    Returns
+    -------
+    (f, 2, 3) float64
+    """
+    a = vertices[triangles[:, 0]]
+    e1 = vertices[triangles[:, 1]] - a
+    e2 = vertices[triangles[:, 2]] - a
+    g11 = np.einsum("ij,ij->i", e1, e1)
+    g12 = np.einsum("ij,ij->i", e1, e2)
+    g22 = np.einsum("ij,ij->i", e2, e2)
+    det = g11 * g22 - g12 * g12
+    det = np.where(det > 0, det, np.inf)
+    r1 = (g22[:, None] * e1 - g12[:, None] * e2) / det[:, None]
+    r2 = (g11[:, None] * e2 - g12[:, None] * e1) / det[:, None]
+    return np.stack([r1, r2], axis=1)
+
+
+def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray, eps: float = 1e-9) -> np.ndarray:
+    """Whether ``points[i]`` lies inside polygon ``polygons[i]`` (closed).
+
+    Tests the triangles of each query's polygon slot by slot (most polygons have one or
+    two triangles), with the precomputed barycentric maps of
+    :func:`triangle_dual_basis`, and keeps testing only the queries not yet inside.
+
+    Parameters
+    ----------
+    scene : Scene
+    points : (k, 3) float64
+        Points on (or numerically near) the polygons' planes [m].
+    polygons : (k,) int64
+    eps : float
+        Barycentric margin (accepts points on an edge shared by two triangles of one
+        polygon despite rounding).
+
+    Returns
+    -------
+    (k,) bool
+    """
+    k = len(points)
+    out = np.zeros(k, dtype=bool)
+    if k == 0:
+        return out
+    dual = scene.triangle_dual
+    origin = scene.vertices[scene.triangles[:, 0]]
+    ptr = scene.polygon_tri_ptr
+    counts = ptr[polygons + 1] - ptr[polygons]
+    pending = np.arange(k)
+    j = 0
+    while len(pending):
+        pending = pending[counts[pending] > j]
+        if len(pending) == 0:
+            break
+        tri = scene.polygon_tris[ptr[polygons[pending]] + j]
+        rel = points[pending] - origin[tri]
+        m = dual[tri]
+        v = m[:, 0, 0] * rel[:, 0] + m[:, 0, 1] * rel[:, 1] + m[:, 0, 2] * rel[:, 2]
+        w = m[:, 1, 0] * rel[:, 0] + m[:, 1, 1] * rel[:, 1] + m[:, 1, 2] * rel[:, 2]
+        hit = (v >= -eps) & (w >= -eps) & (v + w <= 1 + eps)
+        out[pending[hit]] = True
+        pending = pending[~hit]
+        j += 1
+    return out
+
+
+def signed_plane_distance(scene: "Scene", points: np.ndarray, polygons: np.ndarray) -> np.ndarray:
+    """Signed distance [m] of ``points[i]`` (k, 3) from the plane of ``polygons[i]``."""
+    return np.einsum("ij,ij->i", points, scene.polygon_normal[polygons]) - scene.polygon_offset[polygons]

@@ -1,0 +1,42 @@
+"""Geometric tolerances, scaled to the scene.
+
+Every tolerance the engine uses is a named field here, with the reason beside it, and
+is expressed relative to the scene's size (the length of its bounding-box diagonal) so
+that a 10 m room and a 2 km city behave alike. Nothing is a module global: a
+:class:`SceneTolerances` travels with its :class:`~wavepaths.scene.model.Scene`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SceneTolerances:
+    """Relative tolerances, multiplied by the scene diagonal to give metres.
+
+    Attributes
+    ----------
+    weld : float
+        Vertices of different triangles closer than ``weld * diagonal`` are one vertex.
+        Meshes exported in float32 (PLY files written by Blender for Sionna RT) carry
+        coordinates rounded to about 6e-8 of their magnitude; 1e-6 covers that with a
+        margin while staying far below any feature of a real scene (1 mm in 1 km).
+    coplanar_angle : float
+        Two triangles are coplanar when their normals differ by less than this angle
+        [rad]. Normals computed from float32 vertices of a long thin triangle can deviate
+        by ~1e-6 rad; 1e-5 rad keeps distinct facets of curved objects apart.
+    plane_distance : float
+        A point lies in a plane when within ``plane_distance * diagonal`` of it (used to
+        find edges lying inside another object's face).
+    ray_offset : float
+        Segments cast through Embree are shortened by ``ray_offset * diagonal`` at both
+        ends, so that a segment starting or ending on a surface does not hit that
+        surface. Embree works in float32 on recentred coordinates, whose resolution is
+        about 6e-8 of the scene half-size; 1e-6 is 30 times that.
+    """
+
+    weld: float = 1e-6
+    coplanar_angle: float = 1e-5
+    plane_distance: float = 1e-6
+    ray_offset: float = 1e-6

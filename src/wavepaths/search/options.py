@@ -1,0 +1,63 @@
+"""What to trace: one frozen options object shared by the path and coverage solvers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from ..errors import WavepathsError
+
+
+@dataclass(frozen=True)
+class TraceOptions:
+    """Which propagation mechanisms to search for, and up to which order.
+
+    Attributes
+    ----------
+    los : bool
+        Line of sight.
+    max_reflections : int
+        Highest order of purely specular paths (0 to 6; the image tree grows as
+        polygons ** order, pruned by visibility half-spaces).
+    diffraction : bool
+        First-order edge diffraction (seed §2.3 closed-form point, §3.3 validity).
+    diffraction_reflections : int
+        How many specular reflections may accompany the one diffraction, before
+        and after it together (0: D only; 1: R-D and D-R; 2: also R-R-D, R-D-R,
+        D-R-R). Total interactions of a diffracted path are ``1 + this``.
+    lit_region : bool
+        Keep diffracted paths whose receiver is lit by the incident field (outside
+        the incident shadow boundary, ``|phi - phi'| < pi``). UTD needs them for a
+        continuous total field; ``False`` keeps only the shadow region.
+    skip_absorbers : bool
+        Never reflect off polygons whose material is an absorber.
+    rx_batch : int
+        Receivers processed per vectorised tile (memory vs. overhead).
+    """
+
+    los: bool = True
+    max_reflections: int = 2
+    diffraction: bool = True
+    diffraction_reflections: int = 1
+    lit_region: bool = True
+    skip_absorbers: bool = True
+    rx_batch: int = 256
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.max_reflections <= 6:
+            raise WavepathsError(f"`max_reflections` must be in 0..6, got {self.max_reflections}")
+        if not 0 <= self.diffraction_reflections <= 4:
+            raise WavepathsError(f"`diffraction_reflections` must be in 0..4, got {self.diffraction_reflections}")
+        if self.rx_batch < 1:
+            raise WavepathsError(f"`rx_batch` must be positive, got {self.rx_batch}")
+
+    def with_(self, **changes) -> "TraceOptions":
+        """A copy with some fields changed."""
+        return replace(self, **changes)
+
+    @property
+    def max_depth(self) -> int:
+        """The largest number of interactions any path may have."""
+        d = self.max_reflections
+        if self.diffraction:
+            d = max(d, 1 + self.diffraction_reflections)
+        return d

@@ -1,0 +1,265 @@
+"""Paths: the geometry of every propagation path found, as a struct of arrays.
+
+Inside the engine paths stay flat (one row per path, padded only to the deepest
+path). :meth:`Paths.padded` turns them into the (tx, rx, path) form; :meth:`Paths.records`
+into plain dictionaries for tables and JSON.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SPEED_OF_LIGHT = 299_792_458.0  # m/s
+
+
+class InteractionType(enum.IntEnum):
+    """What happens at a path vertex. Line-of-sight paths have no interaction."""
+
+    NONE = 0
+    REFLECTION = 1
+    DIFFRACTION = 2
+
+
+INTERACTION_NAMES = {InteractionType.REFLECTION: "reflection", InteractionType.DIFFRACTION: "diffraction"}
+
+
+@dataclass(frozen=True, eq=False)
+class Paths:
+    """Every path found between ``m`` transmitters and ``n`` receivers (flat, ``N`` paths).
+
+    Attributes
+    ----------
+    tx_positions : (m, 3) float64 [m]
+    rx_positions : (n, 3) float64 [m]
+    tx_index, rx_index : (N,) int64
+        Transmitter and receiver of each path.
+    depth : (N,) int64
+        Number of interactions (0 for line of sight).
+    interactions : (N, D) int8
+        :class:`InteractionType` of each interaction in path order, ``NONE`` past ``depth``.
+    primitive : (N, D) int64
+        Polygon index for a reflection, dihedron index for a diffraction, -1 past ``depth``.
+    triangle : (N, D) int64
+        For a reflection, a triangle of its polygon (object and material); for a
+        diffraction, the triangle of the 0-face; -1 past ``depth``.
+    wedge_faces : (N, 2) int64
+        For the (single) diffraction of a path: indices into the dihedra's face arrays
+        of the 0-face and the n-face found by FindDihedron; -1 for paths without one.
+    vertices : (N, D + 2, 3) float64
+        Transmitter, interaction points, receiver [m]. Past ``depth + 1`` the receiver
+        position repeats, so segments there have zero length.
+    stats : dict
+        Per-stage counters: candidates considered, rejected by each test, rays cast.
+    """
+
+    tx_positions: np.ndarray
+    rx_positions: np.ndarray
+    tx_index: np.ndarray
+    rx_index: np.ndarray
+    depth: np.ndarray
+    interactions: np.ndarray
+    primitive: np.ndarray
+    triangle: np.ndarray
+    wedge_faces: np.ndarray
+    vertices: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.tx_index)
+
+    # ---- derived geometry ----------------------------------------------------------
+    @property
+    def max_depth(self) -> int:
+        return self.interactions.shape[1]
+
+    @property
+    def segment_lengths(self) -> np.ndarray:
+        """(N, D + 1) float64: length of each segment [m] (0 past the path's end)."""
+        return np.linalg.norm(np.diff(self.vertices, axis=1), axis=2)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """(N,) float64: total path length [m]."""
+        return self.segment_lengths.sum(axis=1)
+
+    @property
+    def delays(self) -> np.ndarray:
+        """(N,) float64: propagation delay [s]."""
+        return self.lengths / SPEED_OF_LIGHT
+
+    @property
+    def departure_directions(self) -> np.ndarray:
+        """(N, 3) float64: unit vector leaving the transmitter."""
+        d = self.vertices[:, 1] - self.vertices[:, 0]
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    @property
+    def arrival_directions(self) -> np.ndarray:
+        """(N, 3) float64: unit propagation direction arriving at the receiver."""
+        rows = np.arange(len(self))
+        last = self.vertices[rows, self.depth + 1] - self.vertices[rows, self.depth]
+        return last / np.linalg.norm(last, axis=1, keepdims=True)
+
+    @staticmethod
+    def _zenith_azimuth(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1], d[:, 0])
+
+    @property
+    def angles_of_departure(self) -> tuple[np.ndarray, np.ndarray]:
+        """Zenith and azimuth [rad] of the departure direction, each (N,)."""
+        return self._zenith_azimuth(self.departure_directions)
+
+    @property
+    def angles_of_arrival(self) -> tuple[np.ndarray, np.ndarray]:
+        """Zenith and azimuth [rad] of the direction the wave comes from, seen at the receiver, each (N,)."""
+        return self._zenith_azimuth(-self.arrival_directions)
+
+    def objects(self, scene) -> np.ndarray:
+        """(N, D) int64: object id of each interaction (-1 past the end)."""
+        out = np.full(self.triangle.shape, -1, dtype=np.int64)
+        m = self.triangle >= 0
+        out[m] = scene.triangle_object[self.triangle[m]]
+        return out
+
+    def kind_names(self) -> list[list[str]]:
+        """Interaction names of each path, e.g. ``["reflection", "diffraction"]``."""
+        return [[INTERACTION_NAMES[InteractionType(t)] for t in row[:d]] for row, d in zip(self.interactions, self.depth)]
+
+    def select(self, mask: np.ndarray) -> "Paths":
+        """The paths where ``mask`` (N,) is true."""
+        return Paths(
+            self.tx_positions,
+            self.rx_positions,
+            self.tx_index[mask],
+            self.rx_index[mask],
+            self.depth[mask],
+            self.interactions[mask],
+            self.primitive[mask],
+            self.triangle[mask],
+            self.wedge_faces[mask],
+            self.vertices[mask],
+            dict(self.stats),
+        )
+
+    # ---- public forms ---------------------------------------------------------------
+    def padded(self) -> dict[str, np.ndarray]:
+        """The (tx, rx, path) form, like Sionna RT's ``Paths``.
+
+        Returns
+        -------
+        dict with
+            ``valid`` (m, n, P) bool; ``vertices`` (m, n, P, D + 2, 3); ``interactions``,
+            ``primitive`` (m, n, P, D); ``lengths``, ``delays`` (m, n, P); ``depth``
+            (m, n, P). ``P`` is the largest number of paths of any (tx, rx) pair.
+        """
+        m, n = len(self.tx_positions), len(self.rx_positions)
+        pair = self.tx_index * n + self.rx_index
+        order = np.argsort(pair, kind="stable")
+        counts = np.bincount(pair, minlength=m * n)
+        p = int(counts.max()) if len(counts) and len(self) else 0
+        slot = np.empty(len(self), dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot[order] = np.arange(len(self)) - np.repeat(starts, counts)
+        d = self.max_depth
+        out = {
+            "valid": np.zeros((m, n, p), bool),
+            "vertices": np.zeros((m, n, p, d + 2, 3)),
+            "interactions": np.zeros((m, n, p, d), np.int8),
+            "primitive": np.full((m, n, p, d), -1, np.int64),
+            "lengths": np.zeros((m, n, p)),
+            "delays": np.zeros((m, n, p)),
+            "depth": np.zeros((m, n, p), np.int64),
+        }
+        ti, ri = self.tx_index, self.rx_index
+        out["valid"][ti, ri, slot] = True
+        out["vertices"][ti, ri, slot] = self.vertices
+        out["interactions"][ti, ri, slot] = self.interactions
+        out["primitive"][ti, ri, slot] = self.primitive
+        out["lengths"][ti, ri, slot] = self.lengths
+        out["delays"][ti, ri, slot] = self.delays
+        out["depth"][ti, ri, slot] = self.depth
+        return out
+
+    def records(self) -> list[dict]:
+        """One plain dictionary per path: ``tx``, ``rx``, ``interactions``, ``vertices``,
+        ``length_m``, ``delay_s``, ``primitives``."""
+        names = self.kind_names()
+        lengths, delays = self.lengths, self.delays
+        out = []
+        for i in range(len(self)):
+            d = int(self.depth[i])
+            out.append(
+                {
+                    "tx": int(self.tx_index[i]),
+                    "rx": int(self.rx_index[i]),
+                    "interactions": names[i],
+                    "primitives": self.primitive[i, :d].tolist(),
+                    "vertices": self.vertices[i, : d + 2].tolist(),
+                    "length_m": float(lengths[i]),
+                    "delay_s": float(delays[i]),
+                }
+            )
+        return out
+
+
+@dataclass
+class PathBatch:
+    """Paths of one family (same depth), before padding. Internal."""
+
+    tx_index: np.ndarray
+    rx_index: np.ndarray
+    interactions: np.ndarray  # (k, d)
+    primitive: np.ndarray  # (k, d)
+    triangle: np.ndarray  # (k, d)
+    wedge_faces: np.ndarray  # (k, 2)
+    vertices: np.ndarray  # (k, d + 2, 3)
+
+
+def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict) -> Paths:
+    """Concatenate path batches of different depths into one padded, sorted :class:`Paths`.
+
+    Paths are sorted by (tx, rx, depth, length) so that output order is deterministic.
+    """
+    batches = [b for b in batches if len(b.tx_index)]
+    dmax = max([b.interactions.shape[1] for b in batches], default=0)
+    if not batches:
+        z = np.zeros(0, np.int64)
+        return Paths(tx, rx, z, z, z, np.zeros((0, dmax), np.int8), np.zeros((0, dmax), np.int64),
+                     np.zeros((0, dmax), np.int64), np.zeros((0, 2), np.int64), np.zeros((0, dmax + 2, 3)), stats)
+
+    def pad(a: np.ndarray, width: int, fill) -> np.ndarray:
+        extra = width - a.shape[1]
+        if extra == 0:
+            return a
+        shape = (a.shape[0], extra) + a.shape[2:]
+        return np.concatenate([a, np.full(shape, fill, dtype=a.dtype)], axis=1)
+
+    verts = []
+    for b in batches:
+        v = b.vertices
+        extra = dmax + 2 - v.shape[1]
+        if extra:
+            v = np.concatenate([v, np.repeat(v[:, -1:], extra, axis=1)], axis=1)
+        verts.append(v)
+    depth = np.concatenate([np.full(len(b.tx_index), b.interactions.shape[1]) for b in batches])
+    txi = np.concatenate([b.tx_index for b in batches])
+    rxi = np.concatenate([b.rx_index for b in batches])
+    vertices = np.concatenate(verts)
+    lengths = np.linalg.norm(np.diff(vertices, axis=1), axis=2).sum(axis=1)
+    order = np.lexsort((lengths, depth, rxi, txi))
+    return Paths(
+        tx_positions=tx,
+        rx_positions=rx,
+        tx_index=txi[order],
+        rx_index=rxi[order],
+        depth=depth[order],
+        interactions=np.concatenate([pad(b.interactions, dmax, 0) for b in batches])[order].astype(np.int8),
+        primitive=np.concatenate([pad(b.primitive, dmax, -1) for b in batches])[order],
+        triangle=np.concatenate([pad(b.triangle, dmax, -1) for b in batches])[order],
+        wedge_faces=np.concatenate([b.wedge_faces for b in batches])[order],
+        vertices=vertices[order],
+        stats=stats,
+    )

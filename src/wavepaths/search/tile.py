@@ -1,0 +1,219 @@
+"""Per-receiver work, vectorised over (receivers in a tile x candidates).
+
+Every function here takes the scene, a :class:`~wavepaths.search.context.TxContext`
+and a tile of receivers, builds the candidate arrays, applies the tests in order of
+cost (segment parameter, point-in-polygon, FindDihedron, occlusion), compacting the
+survivors after each test, and casts the surviving segments in one batch. Each test
+adds to the ``stats`` counters what it rejected.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..topology.find_dihedron import find_dihedron
+from ..topology.sectors import sector_of
+from .context import TxContext
+from .geometry import diffraction_point_parameter
+from .images import ImageLevel, backtrace, build_image_levels
+from .paths import InteractionType, PathBatch
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+
+CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~100 MB)
+
+
+def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter) -> np.ndarray:
+    """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked."""
+    k, s, _ = vertices.shape
+    a = vertices[:, :-1].reshape(-1, 3)
+    b = vertices[:, 1:].reshape(-1, 3)
+    blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)
+    stats["rays_cast"] += a.shape[0]
+    return blocked.any(axis=1)
+
+
+def _triangle_of(scene: "Scene", polygons: np.ndarray) -> np.ndarray:
+    return scene.polygon_tris[scene.polygon_tri_ptr[polygons]]
+
+
+def los_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int, stats: Counter) -> PathBatch:
+    """Line-of-sight paths from every transmitter to every receiver of the tile."""
+    m, n = len(ctx.tx), len(rx)
+    ti = np.repeat(np.arange(m), n)
+    ri = np.tile(np.arange(n), m)
+    a, b = ctx.tx[ti], rx[ri]
+    stats["los_candidates"] += len(ti)
+    ok = np.linalg.norm(b - a, axis=1) > 0
+    blocked = np.zeros(len(ti), dtype=bool)
+    blocked[ok] = scene.raycaster.occluded(a[ok], b[ok])
+    stats["rays_cast"] += int(ok.sum())
+    ok &= ~blocked
+    stats["los_rejected_occluded"] += int(blocked.sum())
+    k = int(ok.sum())
+    return PathBatch(
+        ti[ok], ri[ok] + rx_offset, np.zeros((k, 0), np.int8), np.zeros((k, 0), np.int64),
+        np.zeros((k, 0), np.int64), np.full((k, 2), -1, np.int64), np.stack([a[ok], b[ok]], axis=1),
+    )
+
+
+def reflection_tile(
+    scene: "Scene", ctx: TxContext, order: int, rx: np.ndarray, rx_offset: int, stats: Counter
+) -> list[PathBatch]:
+    """Specular paths of one order: image method backwards from each receiver."""
+    lv = ctx.levels[order]
+    c, n = len(lv), len(rx)
+    out = []
+    if c == 0 or n == 0:
+        return out
+    step = max(1, CANDIDATE_BUDGET // c)
+    tag = f"reflection_order_{order}"
+    for s in range(0, n, step):
+        r = np.arange(s, min(n, s + step))
+        ri = np.repeat(r, c)
+        ci = np.tile(np.arange(c), len(r))
+        stats[f"{tag}_candidates"] += len(ri)
+        ok, pts, rej = backtrace(scene, rx[ri], lv, ci)
+        stats[f"{tag}_rejected_segment"] += rej["segment"]
+        stats[f"{tag}_rejected_outside_polygon"] += rej["outside_polygon"]
+        ri, ci = ri[ok], ci[ok]
+        verts = np.concatenate([lv.images[ci, :1], pts, rx[ri][:, None, :]], axis=1)
+        blocked = _occluded_chains(scene, verts, stats)
+        stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
+        keep = ~blocked
+        ri, ci, verts = ri[keep], ci[keep], verts[keep]
+        polys = lv.polygons[ci]
+        k = len(ri)
+        out.append(
+            PathBatch(
+                lv.source[ci], ri + rx_offset, np.full((k, order), InteractionType.REFLECTION, np.int8), polys,
+                _triangle_of(scene, polys), np.full((k, 2), -1, np.int64), verts,
+            )
+        )
+    return out
+
+
+def _join(ctx: TxContext, a: int, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each receiver-side key, all transmitter-side sources with the same key.
+
+    Returns the receiver-side row and the transmitter-side row of every match.
+    """
+    src = ctx.diffraction_sources[a]
+    pos = np.searchsorted(src.unique_keys, keys)
+    pos = np.clip(pos, 0, max(len(src.unique_keys) - 1, 0))
+    hit = len(src.unique_keys) > 0
+    match = (src.unique_keys[pos] == keys) if hit else np.zeros(len(keys), bool)
+    count = np.where(match, src.key_count[pos] if hit else 0, 0)
+    rows = np.repeat(np.arange(len(keys)), count)
+    start = np.repeat(np.where(match, src.key_start[pos] if hit else 0, 0), count)
+    offs = np.arange(len(rows)) - np.repeat(np.cumsum(count) - count, count)
+    return rows, start + offs
+
+
+def diffraction_tile(
+    scene: "Scene",
+    ctx: TxContext,
+    a: int,
+    b: int,
+    rx: np.ndarray,
+    rx_levels: list[ImageLevel],
+    rx_offset: int,
+    stats: Counter,
+) -> list[PathBatch]:
+    """Diffracted paths with ``a`` reflections before and ``b`` after the diffraction.
+
+    The diffraction point is found in closed form (seed §2.3) between the transmitter's
+    image of order ``a`` and the receiver's image of order ``b``; FindDihedron (seed
+    §3.3) checks that the path stays in one topological volume; the reflection points on
+    both sides follow by the image method.
+    """
+    dihedra = scene.dihedra
+    tx_lv = ctx.levels[a]
+    rx_lv = rx_levels[b]
+    diffr = ctx.diffracting
+    tag = f"diffraction_{a}r_{b}r"
+    out: list[PathBatch] = []
+    if len(diffr) == 0 or len(rx_lv) == 0 or len(ctx.diffraction_sources[a].chain) == 0:
+        return out
+    step = max(1, CANDIDATE_BUDGET // max(len(diffr), 1))
+    for s in range(0, len(rx_lv), step):
+        e_rows = np.arange(s, min(len(rx_lv), s + step))
+        e = np.repeat(e_rows, len(diffr))
+        d = np.tile(diffr, len(e_rows))
+        sec, width = sector_of(ctx.sectors, d, rx_lv.last[e], dihedra.origin[d])
+        keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+        stats[f"{tag}_receiver_pairs"] += len(e)
+        stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~keep).sum())
+        e, d, sec = e[keep], d[keep], sec[keep]
+        rows, src_rows = _join(ctx, a, d * ctx.key_stride + sec)
+        src = ctx.diffraction_sources[a]
+        e, d = e[rows], d[rows]
+        c = src.chain[src_rows]
+        stats[f"{tag}_candidates"] += len(e)
+        if len(e) == 0:
+            continue
+        # closed-form point on the edge line, then on the segment
+        E = tx_lv.last[c]
+        R = rx_lv.last[e]
+        t = diffraction_point_parameter(E, R, dihedra.origin[d], dihedra.direction[d])
+        on = (t >= 0) & (t <= dihedra.length[d])
+        stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
+        e, d, c, E, R, t = e[on], d[on], c[on], E[on], R[on], t[on]
+        P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
+        # FindDihedron: one topological volume, and the true dihedron's faces
+        test = find_dihedron(dihedra, d, P, E, R)
+        ok = test.valid
+        stats[f"{tag}_rejected_find_dihedron"] += int((~ok).sum())
+        if not ctx.options.lit_region:
+            shadow = np.abs(test.phi - test.phi_prime) > np.pi
+            stats[f"{tag}_rejected_lit_region"] += int((ok & ~shadow).sum())
+            ok &= shadow
+        e, d, c, P, f0, fn = e[ok], d[ok], c[ok], P[ok], test.face_0[ok], test.face_n[ok]
+        # reflections before (transmitter images) and after (receiver images)
+        ok1, pre, rej1 = backtrace(scene, P, tx_lv, c)
+        e, d, c, P, f0, fn = e[ok1], d[ok1], c[ok1], P[ok1], f0[ok1], fn[ok1]
+        ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
+        e, d, c, P, f0, fn, pre = e[ok2], d[ok2], c[ok2], P[ok2], f0[ok2], fn[ok2], pre[ok2]
+        stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
+        stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
+        post = post[:, ::-1]  # path order after the diffraction
+        post_polys = rx_lv.polygons[e][:, ::-1]
+        rx_pos = rx[rx_lv.source[e]]
+        verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
+        blocked = _occluded_chains(scene, verts, stats)
+        stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
+        keep = ~blocked
+        e, d, c, f0, fn, verts, post_polys = e[keep], d[keep], c[keep], f0[keep], fn[keep], verts[keep], post_polys[keep]
+        k = len(e)
+        kinds = np.full((k, a + 1 + b), InteractionType.REFLECTION, np.int8)
+        kinds[:, a] = InteractionType.DIFFRACTION
+        prims = np.concatenate([tx_lv.polygons[c], d[:, None], post_polys], axis=1)
+        tris = np.concatenate(
+            [_triangle_of(scene, tx_lv.polygons[c]), dihedra.face_triangle[f0][:, None], _triangle_of(scene, post_polys)],
+            axis=1,
+        )
+        out.append(
+            PathBatch(tx_lv.source[c], rx_lv.source[e] + rx_offset, kinds, prims, tris, np.stack([f0, fn], axis=1), verts)
+        )
+    return out
+
+
+def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 0) -> tuple[list[PathBatch], Counter]:
+    """All paths of ``ctx.options`` from the context's transmitters to the receivers ``rx``."""
+    opts = ctx.options
+    stats: Counter = Counter()
+    batches: list[PathBatch] = []
+    if opts.los:
+        batches.append(los_tile(scene, ctx, rx, rx_offset, stats))
+    for k in range(1, opts.max_reflections + 1):
+        batches += reflection_tile(scene, ctx, k, rx, rx_offset, stats)
+    if opts.diffraction and len(ctx.diffracting):
+        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers)
+        for a in range(opts.diffraction_reflections + 1):
+            for b in range(opts.diffraction_reflections + 1 - a):
+                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats)
+    return batches, stats

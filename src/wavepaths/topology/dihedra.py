@@ -1,0 +1,304 @@
+"""Dihedra: one per edge support segment, with every face incident to it (seed §3.2).
+
+The seed (Aveneau & Mériaux, §3.1-3.2) replaces the naive "one wedge per pair of
+faces" with one structure per edge: a 3-D line and the list of *all* faces on it. An
+edge shared by three or more faces (objects touching, a box on a ground plane) is then
+represented once, and the validity test of §3.3 (:mod:`wavepaths.topology.find_dihedron`)
+picks the pair of faces that bounds the topological volume a path lives in.
+
+Construction (the "corefinement" the seed assumes, footnote 2):
+
+1. every unique mesh edge gets one face entry per incident triangle, with the seed's
+   ``P_f``: the unit vector in the face plane, perpendicular to the edge, pointing
+   into the face;
+2. an edge lying inside another polygon (the foot of a box standing on a ground
+   plane, a frame set into a wall) gets that polygon as faces too: one half-face on
+   each side of the edge where the polygon extends;
+3. edges whose faces are all coplanar (triangulation diagonals, coplanar junctions)
+   are flat: they are skipped and counted, never candidates;
+4. collinear edges that share a vertex and carry the same set of polygons are merged
+   into one segment, so a diffraction point falling on the shared vertex is found
+   exactly once.
+
+Not handled (documented in docs/scenes.md): objects that interpenetrate (their
+intersection curves are not computed), edges that lie only partly inside another
+polygon, and collinear overlaps of edges of different objects with different end
+points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..scene.mesh_topology import _UnionFind
+from ..scene.polygon_query import points_in_polygons
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+
+
+@dataclass(frozen=True, eq=False)
+class Dihedra:
+    """Struct of arrays over the ``d`` dihedra of a scene.
+
+    Attributes
+    ----------
+    origin : (d, 3) float64
+        Start point A of each edge segment [m].
+    direction : (d, 3) float64
+        Unit edge vector ``w`` (from A to B).
+    length : (d,) float64
+        Segment length [m]; B = origin + length * direction.
+    face_ptr : (d + 1,) int64
+        CSR pointer into the face arrays.
+    face_triangle : (nf,) int64
+        A triangle of the scene that carries the face (gives object and material).
+    face_polygon : (nf,) int64
+    face_direction : (nf, 3) float64
+        The seed's ``P_f``: unit, in the face plane, perpendicular to the edge,
+        pointing from the edge into the face.
+    face_normal : (nf, 3) float64
+        Unit normal of the face's plane (orientation of its triangle).
+    face_count : (d,) int64
+        Distinct polygons on the edge (a polygon the edge runs through counts once).
+    max_sector : (d,) float64
+        Largest angle [rad] between consecutive faces around the edge; the edge can
+        diffract only into a sector wider than pi.
+    diffracting : (d,) bool
+        ``max_sector > pi`` (beyond the flat tolerance): the candidates of the path search.
+    mesh_edges_ptr, mesh_edges : CSR, int64
+        The scene's mesh edges merged into each dihedron.
+    skipped_flat_edges : int
+        Mesh edges whose faces are all coplanar (not dihedra).
+    """
+
+    origin: np.ndarray
+    direction: np.ndarray
+    length: np.ndarray
+    face_ptr: np.ndarray
+    face_triangle: np.ndarray
+    face_polygon: np.ndarray
+    face_direction: np.ndarray
+    face_normal: np.ndarray
+    face_count: np.ndarray
+    max_sector: np.ndarray
+    diffracting: np.ndarray
+    mesh_edges_ptr: np.ndarray
+    mesh_edges: np.ndarray
+    skipped_flat_edges: int
+
+    def __len__(self) -> int:
+        return len(self.origin)
+
+    @property
+    def end(self) -> np.ndarray:
+        """(d, 3) float64: end point B of each segment [m]."""
+        return self.origin + self.length[:, None] * self.direction
+
+    @property
+    def faces_per_dihedron(self) -> np.ndarray:
+        """(d,) int64: number of face entries (half-faces of a through-polygon count twice)."""
+        return np.diff(self.face_ptr)
+
+    def faces(self, i: int) -> slice:
+        """Slice of the face arrays belonging to dihedron ``i``."""
+        return slice(int(self.face_ptr[i]), int(self.face_ptr[i + 1]))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarray, chunk: int = 2_000_000):
+    """Pairs (edge, polygon, side) where the edge runs inside a polygon not incident to it.
+
+    Returns arrays ``edge``, ``polygon`` and ``sign`` (+1/-1): the polygon extends from
+    the edge in direction ``sign * (n_polygon x w)``.
+    """
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    n = scene.polygon_normal
+    d = scene.polygon_offset
+    num_e = len(edge_a)
+    p = len(n)
+    if num_e == 0 or p == 0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z, z
+    # polygon bounding boxes prefilter the (edge, polygon) pairs
+    tri_poly = scene.triangle_polygon
+    corners = scene.vertices[scene.triangles]
+    lo = np.full((p, 3), np.inf)
+    hi = np.full((p, 3), -np.inf)
+    np.minimum.at(lo, tri_poly, corners.min(axis=1))
+    np.maximum.at(hi, tri_poly, corners.max(axis=1))
+    lo -= tol
+    hi += tol
+    mid = 0.5 * (edge_a + edge_b)
+    found_e, found_p = [], []
+    step = max(1, chunk // max(p, 1))
+    for s in range(0, num_e, step):
+        m = mid[s : s + step]
+        inside_box = np.all((m[:, None, :] >= lo[None]) & (m[:, None, :] <= hi[None]), axis=2)
+        ei, pi = np.nonzero(inside_box)
+        ei = ei + s
+        da = np.abs(np.einsum("ij,ij->i", edge_a[ei], n[pi]) - d[pi])
+        db = np.abs(np.einsum("ij,ij->i", edge_b[ei], n[pi]) - d[pi])
+        ok = (da <= tol) & (db <= tol)
+        found_e.append(ei[ok])
+        found_p.append(pi[ok])
+    e = np.concatenate(found_e)
+    pol = np.concatenate(found_p)
+    return e, pol
+
+
+def build_dihedra(scene: "Scene") -> Dihedra:
+    """Build the :class:`Dihedra` of ``scene`` (seed §3.2).
+
+    Cost: O(edges) for the incidence, plus O(edges x polygons) bounding-box tests to
+    find edges lying inside other polygons (chunked; once per scene).
+    """
+    inc = scene.incidence
+    verts = scene.vertices
+    tris = scene.triangles
+    num_e = len(inc.edges)
+    a = verts[inc.edges[:, 0]]
+    b = verts[inc.edges[:, 1]]
+    w = _unit(b - a)
+    elen = np.linalg.norm(b - a, axis=1)
+    cos_tol = np.cos(scene.tolerances.coplanar_angle)
+
+    # 1. one face entry per incident triangle
+    counts = inc.counts
+    entry_edge = np.repeat(np.arange(num_e), counts)
+    entry_tri = inc.incidence_tri
+    third = verts[tris[entry_tri, (inc.incidence_side + 2) % 3]]
+    rel = third - a[entry_edge]
+    pf = _unit(rel - np.einsum("ij,ij->i", rel, w[entry_edge])[:, None] * w[entry_edge])
+    entry_poly = scene.triangle_polygon[entry_tri]
+
+    # 2. edges running inside other polygons get that polygon's half-faces
+    ce, cp = _edges_inside_polygons(scene, a, b)
+    incident = np.zeros(len(ce), dtype=bool)
+    if len(ce):
+        # drop polygons already incident to the edge
+        key_inc = entry_edge.astype(np.int64) * (scene.num_polygons + 1) + entry_poly
+        key_c = ce.astype(np.int64) * (scene.num_polygons + 1) + cp
+        incident = np.isin(key_c, key_inc)
+    ce, cp = ce[~incident], cp[~incident]
+    extra_e, extra_p, extra_pf, extra_tri = [], [], [], []
+    if len(ce):
+        side_dir = _unit(np.cross(scene.polygon_normal[cp], w[ce]))
+        mid = 0.5 * (a[ce] + b[ce])
+        probe = np.maximum(elen[ce] * 1e-3, scene.length_tolerance(scene.tolerances.weld) * 10)
+        for sign in (1.0, -1.0):
+            pts = mid + sign * probe[:, None] * side_dir
+            inside = points_in_polygons(scene, pts, cp)
+            extra_e.append(ce[inside])
+            extra_p.append(cp[inside])
+            extra_pf.append(sign * side_dir[inside])
+            extra_tri.append(scene.polygon_tris[scene.polygon_tri_ptr[cp[inside]]])
+    if extra_e:
+        entry_edge = np.concatenate([entry_edge, *extra_e])
+        entry_poly = np.concatenate([entry_poly, *extra_p])
+        pf = np.concatenate([pf, *extra_pf])
+        entry_tri = np.concatenate([entry_tri, *extra_tri])
+    order = np.argsort(entry_edge, kind="stable")
+    entry_edge, entry_poly, pf, entry_tri = entry_edge[order], entry_poly[order], pf[order], entry_tri[order]
+    counts = np.bincount(entry_edge, minlength=num_e)
+    ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+    # 3. sectors around each edge, flatness
+    x_hat = pf[ptr[:-1][entry_edge]]  # first face of each edge as the angular origin
+    y_hat = np.cross(w[entry_edge], x_hat)
+    ang = np.mod(np.arctan2(np.einsum("ij,ij->i", pf, y_hat), np.einsum("ij,ij->i", pf, x_hat)), 2 * np.pi)
+    srt = np.lexsort((ang, entry_edge))
+    ang_sorted = ang[srt]
+    nxt = np.roll(np.arange(len(ang_sorted)), -1)
+    last = ptr[1:] - 1
+    nxt[last] = ptr[:-1]  # wrap to the first face of the same edge
+    gaps = np.mod(ang_sorted[nxt] - ang_sorted, 2 * np.pi)
+    gaps[last] += np.where(counts == 1, 2 * np.pi, 0.0)  # a free edge: one 2*pi sector
+    # a single-entry wrap gives 0 above; fix the general wrap for counts > 1
+    wrap = counts > 1
+    gaps[last[wrap]] = 2 * np.pi - (ang_sorted[last[wrap]] - ang_sorted[ptr[:-1][wrap]])
+    max_sector = np.zeros(num_e)
+    np.maximum.at(max_sector, entry_edge[srt], gaps)
+    collinear = np.abs(np.einsum("ij,ij->i", pf, x_hat)) >= cos_tol
+    all_collinear = np.bincount(entry_edge, weights=~collinear, minlength=num_e) == 0
+    has_opposite = np.bincount(entry_edge, weights=np.einsum("ij,ij->i", pf, x_hat) < 0, minlength=num_e) > 0
+    flat = (counts >= 2) & all_collinear & has_opposite
+    keep = ~flat
+
+    # 4. merge collinear chains with the same polygon set
+    kept = np.nonzero(keep)[0]
+    max_faces = int(counts.max()) if num_e else 0
+    poly_key = np.full((num_e, max(max_faces, 1)), -1, dtype=np.int64)
+    slot = np.arange(len(entry_edge)) - ptr[entry_edge]
+    poly_key[entry_edge, slot] = entry_poly
+    poly_key.sort(axis=1)
+    _, set_id = np.unique(poly_key, axis=0, return_inverse=True)
+    set_id = set_id.reshape(-1)
+    uf = _UnionFind(num_e)
+    vert_edge_v = np.concatenate([inc.edges[kept, 0], inc.edges[kept, 1]])
+    vert_edge_e = np.concatenate([kept, kept])
+    o = np.lexsort((vert_edge_e, vert_edge_v))
+    vv, ve = vert_edge_v[o], vert_edge_e[o]
+    same_v = vv[1:] == vv[:-1]
+    pa, pb = ve[:-1][same_v], ve[1:][same_v]
+    # only adjacent pairs in the sorted order: enough when exactly two edges of a set meet
+    ok = (set_id[pa] == set_id[pb]) & (np.abs(np.einsum("ij,ij->i", w[pa], w[pb])) >= cos_tol)
+    if ok.any():
+        # a vertex where more than two edges of the same set meet is a branching point: do not merge there
+        vcount = np.bincount(vv, minlength=len(verts))
+        ok &= vcount[vv[1:][same_v]] == 2
+        uf.union_pairs(pa[ok], pb[ok])
+    roots = uf.find_all()[kept]
+    groups, group_of = np.unique(roots, return_inverse=True)
+    group_of = group_of.reshape(-1)
+    ng = len(groups)
+    rep = kept[np.unique(group_of, return_index=True)[1]]  # representative mesh edge per group
+    wr = w[rep]
+    ar = a[rep]
+    # extent along the representative direction
+    ta = np.einsum("ij,ij->i", a[kept] - ar[group_of], wr[group_of])
+    tb = np.einsum("ij,ij->i", b[kept] - ar[group_of], wr[group_of])
+    tmin = np.full(ng, np.inf)
+    tmax = np.full(ng, -np.inf)
+    np.minimum.at(tmin, group_of, np.minimum(ta, tb))
+    np.maximum.at(tmax, group_of, np.maximum(ta, tb))
+    origin = ar + tmin[:, None] * wr
+    length = tmax - tmin
+
+    f_counts = counts[rep]
+    f_ptr = np.concatenate([[0], np.cumsum(f_counts)]).astype(np.int64)
+    f_owner = np.repeat(np.arange(ng), f_counts)
+    f_idx = np.repeat(ptr[rep], f_counts) + (np.arange(int(f_ptr[-1])) - f_ptr[:-1][f_owner])
+    face_tri = entry_tri[f_idx]
+    face_poly = entry_poly[f_idx]
+    face_dir = pf[f_idx]
+    face_normal = scene.polygon_normal[face_poly]
+    pairs = np.unique(np.stack([f_owner, face_poly], axis=1), axis=0)
+    distinct = np.bincount(pairs[:, 0], minlength=ng).astype(np.int64)
+    m_order = np.argsort(group_of, kind="stable")
+    m_ptr = np.concatenate([[0], np.cumsum(np.bincount(group_of, minlength=ng))]).astype(np.int64)
+    sector = max_sector[rep]
+    flat_tol = scene.tolerances.coplanar_angle
+    return Dihedra(
+        origin=origin,
+        direction=wr,
+        length=length,
+        face_ptr=f_ptr,
+        face_triangle=face_tri.astype(np.int64),
+        face_polygon=face_poly.astype(np.int64),
+        face_direction=face_dir,
+        face_normal=face_normal,
+        face_count=distinct,
+        max_sector=sector,
+        diffracting=sector > np.pi + flat_tol,
+        mesh_edges_ptr=m_ptr,
+        mesh_edges=kept[m_order].astype(np.int64),
+        skipped_flat_edges=int(flat.sum()),
+    )

@@ -1,0 +1,97 @@
+"""The angular sectors around each dihedron's edge, for receiver-independent pruning.
+
+Around an edge, its faces cut the plane perpendicular to it into sectors. A point
+(a transmitter or one of its images) can start a diffracted path only from a sector
+wider than pi (a convex wedge's outside): this depends on the point and the edge
+line only, not on where along the edge the path lands, so the path search evaluates
+it once per (source, dihedron) and drops the rest before any receiver is looked at.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dihedra import Dihedra
+
+
+@dataclass(frozen=True)
+class SectorTable:
+    """Sorted face angles around each edge, padded to ``m`` faces.
+
+    Attributes
+    ----------
+    x_hat, y_hat : (d, 3) float64
+        In-plane frame of each edge (``x_hat`` = first face's ``P_f``, ``y_hat = w x x_hat``).
+    angles : (d, m) float64
+        Face angles in [0, 2 pi), ascending; padding is +inf.
+    count : (d,) int64
+    width : (d, m) float64
+        Width [rad] of the sector starting at ``angles[:, j]`` (counter-clockwise).
+    """
+
+    x_hat: np.ndarray
+    y_hat: np.ndarray
+    angles: np.ndarray
+    count: np.ndarray
+    width: np.ndarray
+
+
+def sector_table(dihedra: Dihedra) -> SectorTable:
+    d = len(dihedra)
+    count = np.diff(dihedra.face_ptr)
+    m = max(int(count.max()) if d else 1, 1)
+    owner = np.repeat(np.arange(d), count)
+    w = dihedra.direction
+    x_hat = dihedra.face_direction[dihedra.face_ptr[:-1]] if d else np.zeros((0, 3))
+    y_hat = np.cross(w, x_hat)
+    pf = dihedra.face_direction
+    ang = np.mod(np.arctan2(np.einsum("ij,ij->i", pf, y_hat[owner]), np.einsum("ij,ij->i", pf, x_hat[owner])), 2 * np.pi)
+    table = np.full((d, m), np.inf)
+    slot = np.arange(len(owner)) - dihedra.face_ptr[:-1][owner]
+    table[owner, slot] = ang
+    table.sort(axis=1)
+    nxt = np.roll(table, -1, axis=1)
+    last = count - 1
+    rows = np.arange(d)
+    nxt[rows, last] = table[rows, 0] + 2 * np.pi
+    finite = np.isfinite(table)
+    width = np.zeros_like(table)
+    width[finite] = nxt[finite] - table[finite]
+    return SectorTable(x_hat, y_hat, table, count, width)
+
+
+def sector_of(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, origin: np.ndarray, tol: float = 1e-12):
+    """Sector index and width for ``points`` around ``dihedron`` edges.
+
+    Parameters
+    ----------
+    table : SectorTable
+    dihedron : (k,) int64
+    points : (k, 3) float64
+    origin : (k, 3) float64
+        A point on each edge line.
+    tol : float
+        Angular margin [rad]: points within it of a face, or on the edge line, get
+        sector -1 (never a diffraction source).
+
+    Returns
+    -------
+    sector : (k,) int64
+    width : (k,) float64
+    """
+    v = points - origin
+    x = np.einsum("ij,ij->i", v, table.x_hat[dihedron])
+    y = np.einsum("ij,ij->i", v, table.y_hat[dihedron])
+    theta = np.mod(np.arctan2(y, x), 2 * np.pi)
+    angles = table.angles[dihedron]
+    below = (angles <= theta[:, None]).sum(axis=1)
+    sector = np.mod(below - 1, table.count[dihedron])
+    rows = np.arange(len(dihedron))
+    finite = np.isfinite(angles)
+    near = np.abs(np.where(finite, angles, 0.0) - theta[:, None])
+    near = np.where(finite, np.minimum(near, 2 * np.pi - near), np.inf)
+    on_face = (near < tol).any(axis=1) | (np.hypot(x, y) == 0)
+    width = table.width[dihedron][rows, sector]
+    return np.where(on_face, -1, sector), np.where(on_face, 0.0, width)

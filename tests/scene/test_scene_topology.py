@@ -1,0 +1,121 @@
+"""Scenes and dihedra: closed-form topology (seed §3.2)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths.scene import load_scene
+from wavepaths.topology.sectors import sector_table
+
+from ..conftest import boxes_scene, quads_scene
+
+
+def sectors_of(scene, i):
+    t = sector_table(scene.dihedra)
+    w = t.width[i][: t.count[i]]
+    return np.sort(w)
+
+
+def test_cube_has_twelve_right_angle_wedges():
+    s = boxes_scene([((0, 0, 0), (1, 1, 1))])
+    d = s.dihedra
+    assert len(d) == 12
+    assert (d.face_count == 2).all()
+    # exterior angle n*pi with n = 1.5
+    np.testing.assert_allclose(d.max_sector, 1.5 * np.pi, atol=1e-12)
+    assert d.diffracting.all()
+    np.testing.assert_allclose(d.length, 1.0, atol=1e-12)
+    assert s.num_polygons == 6
+    assert d.skipped_flat_edges == 6  # one diagonal per face
+
+
+def test_single_rectangle_has_four_free_edges():
+    s = quads_scene([[[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]]])
+    d = s.dihedra
+    assert len(d) == 4
+    assert (d.face_count == 1).all()
+    np.testing.assert_allclose(d.max_sector, 2 * np.pi)
+    assert sorted(np.round(d.length, 12).tolist()) == [1.0, 1.0, 2.0, 2.0]
+
+
+def test_triangulated_quad_diagonal_is_not_a_dihedron():
+    s = quads_scene([[[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]]])
+    d = s.dihedra
+    diag = np.array([1.0, 0.5, 0.0])  # midpoint of the diagonal
+    mids = d.origin + 0.5 * d.length[:, None] * d.direction
+    assert np.min(np.linalg.norm(mids - diag, axis=1)) > 0.4
+    assert d.skipped_flat_edges == 1
+
+
+def test_box_on_ground_foot_is_a_right_angle_corner_not_a_free_wedge():
+    s = boxes_scene([((-1, -1, 0), (1, 1, 2))], ground=10)
+    d = s.dihedra
+    foot = np.nonzero((np.abs(d.origin[:, 2]) < 1e-12) & (np.abs(d.direction[:, 2]) < 1e-12) & (d.length < 3))[0]
+    assert len(foot) == 4
+    for i in foot:
+        assert d.face_count[i] == 3  # wall, floor of the box, ground
+        assert not d.diffracting[i]
+        # around the edge: the air corner (pi/2), the box (pi/2), the box floor on the ground (0), underground (pi)
+        np.testing.assert_allclose(sectors_of(s, i), [0, np.pi / 2, np.pi / 2, np.pi], atol=1e-9)
+    # the box's other 8 edges are ordinary 270 degree wedges
+    upper = np.setdiff1d(np.nonzero(d.face_count == 2)[0], foot)
+    assert len(upper) == 8
+    np.testing.assert_allclose(d.max_sector[upper], 1.5 * np.pi)
+
+
+def test_two_boxes_touching_along_a_face_share_the_contact_edges():
+    s = boxes_scene([((0, 0, 0), (1, 1, 1)), ((1, 0, 0), (2, 1, 1))])
+    d = s.dihedra
+    on_contact = np.abs(d.origin[:, 0] - 1) < 1e-12
+    on_contact &= np.abs(d.direction[:, 0]) < 1e-12
+    idx = np.nonzero(on_contact)[0]
+    assert len(idx) == 4  # each contact edge represented once
+    assert (d.face_count[idx] == 4).all()
+    # the contact is flat on the outside: nothing to diffract
+    assert not d.diffracting[idx].any()
+    # no edge twice anywhere
+    keys = np.round(np.concatenate([d.origin, d.end], axis=1), 9)
+    keys = np.sort(keys.reshape(-1, 2, 3), axis=1).reshape(-1, 6)
+    assert len(np.unique(keys, axis=0)) == len(d)
+
+
+def test_touching_blocks_edge_has_two_quarter_air_sectors():
+    s = load_scene("touching_blocks")
+    d = s.dihedra
+    i = np.nonzero(d.face_count >= 3)[0]
+    assert len(i) == 1
+    np.testing.assert_allclose(sectors_of(s, i[0]), [np.pi / 2] * 4, atol=1e-9)
+    assert not d.diffracting[i[0]]
+
+
+def test_three_face_edge_true_dihedron():
+    s = load_scene("three_face_edge")
+    d = s.dihedra
+    i = np.nonzero(d.face_count == 3)[0]
+    assert len(i) == 1
+    # box top (180 deg), box wall (270 deg), awning (330 deg): sectors 60, 90, 210 degrees
+    np.testing.assert_allclose(np.rad2deg(sectors_of(s, i[0])), [60, 90, 210], atol=1e-9)
+    assert d.diffracting[i[0]]
+
+
+def test_collinear_edges_with_the_same_faces_merge():
+    # a strip made of two quads side by side: the long edges are split at x = 1
+    s = quads_scene(
+        [[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0]]], objects=[0, 0]
+    )
+    d = s.dihedra
+    assert s.num_polygons == 1
+    assert len(d) == 4
+    assert sorted(np.round(d.length, 9).tolist()) == [1.0, 1.0, 2.0, 2.0]
+
+
+@pytest.mark.parametrize("name", ["half_plane", "wedge", "box_on_ground", "slit_shutter", "street_canyon",
+                                  "three_face_edge", "touching_blocks"])
+def test_builtin_scenes_load_and_have_closed_bounds(name):
+    s = load_scene(name)
+    info = s.summary()
+    assert info["triangles"] > 0 and info["dihedra"] > 0
+    assert sum(info["dihedra_by_face_count"].values()) == info["dihedra"]
+    lo, hi = np.array(info["bounds"])
+    assert (hi >= lo).all()
