@@ -152,6 +152,13 @@ def _prepare(
     return list(np.broadcast_arrays(*arrs))
 
 
+def _check_r(*rs: ArrayLike) -> list[CArray]:
+    out = [np.asarray(r, dtype=np.complex128) for r in rs]
+    if not all(np.all(np.isfinite(r)) for r in out):
+        raise WavepathsError("face reflection coefficients must be finite")
+    return out
+
+
 def _check_floor(value: float, name: str) -> None:
     if not (0.0 < value < 1.0):
         raise WavepathsError(f"`{name}` must lie in (0, 1), got {value!r}")
@@ -290,7 +297,7 @@ def luebbers_coefficients(
     _check_floor(sin_beta_0_floor, "sin_beta_0_floor")
     p, pp, b0, nn, kk, ll = _prepare(phi, phi_prime, beta_0, n, k, L)
     d1, d2, d3, d4 = _four_terms(p, pp, b0, nn, kk, ll, sin_beta_0_floor, None)
-    rs = [np.asarray(r, dtype=np.complex128) for r in (r0_s, r0_h, rn_s, rn_h)]
+    rs = _check_r(r0_s, r0_h, rn_s, rn_h)
     base = d1 + d2
     return WedgeCoefficients(base + rs[0] * d4 + rs[2] * d3, base + rs[1] * d4 + rs[3] * d3)
 
@@ -530,7 +537,7 @@ def sionna_compat_coefficients(
     p, pp, b0, nn, kk, ll = _prepare(phi, phi_prime, beta_0, n, k, L)
     d1, d2, d3, d4 = _four_terms(p, pp, b0, nn, kk, ll, sin_beta_0_floor, None)
     shape = p.shape
-    rr = [np.broadcast_to(np.asarray(r, dtype=np.complex128), shape) for r in (r0_te, r0_tm, rn_te, rn_tm)]
+    rr = [np.broadcast_to(r, shape) for r in _check_r(r0_te, r0_tm, rn_te, rn_tm)]
     sb, cb = np.sin(b0), np.cos(b0)
     k_i = np.stack([-sb * np.cos(pp), -sb * np.sin(pp), cb], axis=-1)
     phi_in = np.stack([-np.sin(pp), np.cos(pp), np.zeros(shape)], axis=-1)
@@ -583,7 +590,7 @@ def diffraction_jones(
         _check_floor(gtd_floor, "gtd_floor")
         p, pp, b0, nn, kk, ll = _prepare(phi, phi_prime, beta_0, n, k, L)
         d1, d2, d3, d4 = _four_terms(p, pp, b0, nn, kk, ll, sin_beta_0_floor, gtd_floor)
-        rs = [np.asarray(r, dtype=np.complex128) for r in (r0_s, r0_h, rn_s, rn_h)]
+        rs = _check_r(r0_s, r0_h, rn_s, rn_h)
         d_s = d1 + d2 + rs[0] * d4 + rs[2] * d3
         d_h = d1 + d2 + rs[1] * d4 + rs[3] * d3
     d_s, d_h = np.broadcast_arrays(d_s, d_h)

@@ -28,13 +28,20 @@ CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~10
 
 
 def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter) -> np.ndarray:
-    """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked."""
+    """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked.
+
+    A chain with a degenerate segment (shorter than the weld tolerance: two interactions
+    at one point, e.g. a reflection on a face exactly at the edge it then diffracts on)
+    counts as blocked: its geometry is undefined.
+    """
     k, s, _ = vertices.shape
+    seg = np.linalg.norm(np.diff(vertices, axis=1), axis=2)
+    degenerate = (seg <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
     a = vertices[:, :-1].reshape(-1, 3)
     b = vertices[:, 1:].reshape(-1, 3)
     blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)
     stats["rays_cast"] += a.shape[0]
-    return blocked.any(axis=1)
+    return blocked.any(axis=1) | degenerate
 
 
 def _triangle_of(scene: "Scene", polygons: np.ndarray) -> np.ndarray:

@@ -1,0 +1,77 @@
+"""Completeness: the engine finds exactly the paths a brute-force enumerator finds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths import TraceOptions, trace
+from wavepaths.scene import load_scene
+
+from ..conftest import boxes_scene
+from .brute_force import enumerate_paths
+
+
+def engine_paths(scene, tx, rx, **opts):
+    p = trace(scene, tx[None], rx[None], TraceOptions(**opts))
+    out = {}
+    letters = {1: "R", 2: "D"}
+    for i in range(len(p)):
+        d = p.depth[i]
+        key = (tuple(letters[int(t)] for t in p.interactions[i, :d]), tuple(int(x) for x in p.primitive[i, :d]))
+        assert key not in out, f"path found twice: {key}"
+        out[key] = p.lengths[i]
+    return out
+
+
+def random_scene(rng):
+    boxes = []
+    for _ in range(rng.integers(1, 4)):
+        c = rng.uniform(-6, 6, 2)
+        h = rng.uniform(0.5, 2.5, 3)
+        boxes.append(((c[0] - h[0], c[1] - h[1], 0.0), (c[0] + h[0], c[1] + h[1], 2 * h[2])))
+    return boxes_scene(boxes, ground=12)
+
+
+def free_point(rng, scene):
+    for _ in range(100):
+        p = np.array([*rng.uniform(-11, 11, 2), rng.uniform(0.3, 6)])
+        inside = False
+        for o in range(len(scene.object_names) - 1):
+            v = scene.vertices[np.unique(scene.triangles[scene.triangle_object == o])]
+            if (p >= v.min(0) - 0.05).all() and (p <= v.max(0) + 0.05).all():
+                inside = True
+        if not inside:
+            return p
+    raise RuntimeError("no free point")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_engine_equals_brute_force_on_random_scenes(seed):
+    rng = np.random.default_rng(seed)
+    scene = random_scene(rng)
+    tx = free_point(rng, scene)
+    total = 0
+    for _ in range(3):
+        rx = free_point(rng, scene)
+        ref = enumerate_paths(scene, tx, rx, max_reflections=2, diffraction=True, diffraction_reflections=1)
+        got = engine_paths(scene, tx, rx, max_reflections=2, diffraction=True, diffraction_reflections=1)
+        assert set(got) == set(ref), (sorted(set(ref) - set(got)), sorted(set(got) - set(ref)))
+        for k in ref:
+            assert got[k] == pytest.approx(ref[k], rel=1e-7)
+        total += len(ref)
+    assert total >= 6  # not vacuous
+
+
+@pytest.mark.parametrize("name, tx, rx", [
+    ("three_face_edge", (8, 2, 6), (2, 2, 7)),
+    ("three_face_edge", (8, 2, 1), (9, 3, 7)),
+    ("slit_shutter", (0.3, -3, 1.7), (0.2, 3, 1.2)),
+    ("touching_blocks", (2, 6, 3), (6, 2, 3)),
+])
+def test_engine_equals_brute_force_on_builtin_scenes(name, tx, rx):
+    scene = load_scene(name)
+    tx, rx = np.array(tx, float), np.array(rx, float)
+    ref = enumerate_paths(scene, tx, rx, max_reflections=1, diffraction=True, diffraction_reflections=1)
+    got = engine_paths(scene, tx, rx, max_reflections=1, diffraction=True, diffraction_reflections=1)
+    assert set(got) == set(ref), (sorted(set(ref) - set(got)), sorted(set(got) - set(ref)))
