@@ -44,6 +44,8 @@ _MODELS: tuple[str, ...] = ("slab", "half_space")
 
 # |cos(theta)| may exceed 1 by this much from rounding in the caller's dot products.
 _COS_ROUNDING = 1e-9
+# Below this a slab denominator is treated as 0 (exact grazing incidence).
+_TINY = 1e-200
 
 
 class FresnelCoefficients(NamedTuple):
@@ -85,18 +87,25 @@ def _check_eta(eta: ArrayLike) -> NDArray[np.complex128]:
     return e
 
 
-def _safe_ratio(num: NDArray[np.complex128], den: NDArray[np.complex128]) -> NDArray[np.complex128]:
-    """num/den, with 0 where den == 0 (only reached for eta == 1 at exact grazing)."""
-    zero = den == 0
-    out = num / np.where(zero, 1.0, den)
-    return np.where(zero, 0.0, out)
+def _root(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """sqrt(eta - sin^2 theta) = sqrt((eta - 1) + cos^2 theta), principal branch (Re >= 0).
+
+    Written with ``eta - 1`` so that it stays exact for eta near 1 at grazing incidence.
+    """
+    return np.sqrt((eta - 1.0) + c * c)
 
 
 def _half_space(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> FresnelCoefficients:
-    root = np.sqrt(eta - (1.0 - c * c))  # principal branch, Re >= 0
-    r_te = _safe_ratio(c - root, c + root)
-    r_tm = _safe_ratio(eta * c - root, eta * c + root)
-    return FresnelCoefficients(r_te, r_tm)
+    # Eq. (37) rationalised (multiply numerator and denominator by the denominator), using
+    # c^2 - root^2 = 1 - eta: no cancellation, and exactly 0 for eta == 1.
+    root = _root(eta, c)
+    den_te = (c + root) ** 2
+    den_tm = (eta * c + root) ** 2
+    # den ~ 0 only for eta ~ 1 at grazing: no interface, r = 0 (avoids subnormal division).
+    same = (eta == 1.0) | (np.abs(den_te) < _TINY) | (np.abs(den_tm) < _TINY)
+    r_te = (1.0 - eta) / np.where(same, 1.0, den_te)
+    r_tm = (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) / np.where(same, 1.0, den_tm)
+    return FresnelCoefficients(np.where(same, 0.0, r_te), np.where(same, 0.0, r_tm))
 
 
 def fresnel_half_space(eta: ArrayLike, cos_theta: ArrayLike) -> FresnelCoefficients:
@@ -132,7 +141,7 @@ def _slab(
     eta: NDArray[np.complex128], c: NDArray[np.float64], thickness_m: NDArray[np.float64],
     wavelength_m: NDArray[np.float64],
 ) -> SlabCoefficients:
-    root = np.sqrt(eta - (1.0 - c * c))
+    root = _root(eta, c)
     q = (2.0 * np.pi * thickness_m / wavelength_m) * root  # eq. (44)
     r_te_p, r_tm_p = _half_space(eta, c)
     e1 = np.exp(-1j * q)  # |e1| <= 1 because Im(root) <= 0 for Im(eta) <= 0
@@ -140,8 +149,9 @@ def _slab(
     out = []
     for rp in (r_te_p, r_tm_p):
         den = 1.0 - rp * rp * e2
-        # den == 0 only for |rp| == 1 (exact grazing) and e2 == 1: take the grazing limit.
-        bad = den == 0
+        # |den| ~ 0 only at exact grazing (|rp| = 1) with e2 ~ 1: there the limit is R = rp,
+        # T = 0 whatever q. The threshold keeps complex division away from subnormals.
+        bad = np.abs(den) < _TINY
         den = np.where(bad, 1.0, den)
         r = np.where(bad, rp, rp * (1.0 - e2) / den)  # eq. (43a)
         t = np.where(bad, 0.0, (1.0 - rp * rp) * e1 / den)  # eq. (43b)

@@ -96,7 +96,7 @@ def _g(x: Array) -> CArray:
     xs = np.where(big, 1.0, x)
     g_small = _E_PI4 * np.sqrt(np.pi) * erfcx(_E_PI4 * np.sqrt(xs))
     xb = np.where(big, x, 1.0)
-    g_big = (1.0 + 0.5j / xb - 0.75 / (xb * xb)) / np.sqrt(xb)
+    g_big = (1.0 + 0.5j / xb - 0.75 / xb / xb) / np.sqrt(xb)
     return np.where(big, g_big, g_small)
 
 
@@ -128,7 +128,7 @@ def transition_function(x: ArrayLike) -> CArray:
     xs = np.where(big, 1.0, xa)
     f_small = np.sqrt(xs) * _g(xs)
     xb = np.where(big, xa, 1.0)
-    f_big = 1.0 + 0.5j / xb - 0.75 / (xb * xb)
+    f_big = 1.0 + 0.5j / xb - 0.75 / xb / xb
     return np.asarray(np.where(big, f_big, f_small), dtype=np.complex128)
 
 

@@ -140,6 +140,20 @@ class Scene:
 
         return default_raycaster(self)
 
+    @functools.cached_property
+    def exact_raycaster(self) -> "RayCaster":
+        """Float64 occlusion (numpy), for the few segments that graze an edge."""
+        from ..raycast.numpy_caster import NumpyRayCaster
+
+        return NumpyRayCaster(self)
+
+    def __getstate__(self) -> dict:
+        # ray casters hold native handles: they are rebuilt on first use after unpickling
+        state = dict(self.__dict__)
+        state.pop("raycaster", None)
+        state.pop("exact_raycaster", None)
+        return state
+
     def polygon_triangles(self, polygon: int) -> np.ndarray:
         """Triangle indices of ``polygon``."""
         return self.polygon_tris[self.polygon_tri_ptr[polygon] : self.polygon_tri_ptr[polygon + 1]]

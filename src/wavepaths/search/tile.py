@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
 CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~100 MB)
 
 
-def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter) -> np.ndarray:
+def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None) -> np.ndarray:
     """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked.
 
     A chain with a degenerate segment (shorter than the weld tolerance: two interactions
@@ -41,6 +41,13 @@ def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter) -> np
     b = vertices[:, 1:].reshape(-1, 3)
     blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)
     stats["rays_cast"] += a.shape[0]
+    if exact is not None and exact.any():
+        # chains of (tx, rx) pairs that sit on a shadow or reflection boundary: float64 casts
+        sel = np.nonzero(exact)[0]
+        blocked[sel] = scene.exact_raycaster.occluded(
+            vertices[sel, :-1].reshape(-1, 3), vertices[sel, 1:].reshape(-1, 3)
+        ).reshape(len(sel), s - 1)
+        stats["rays_cast_float64"] += len(sel) * (s - 1)
     return blocked.any(axis=1) | degenerate
 
 
@@ -48,17 +55,22 @@ def _triangle_of(scene: "Scene", polygons: np.ndarray) -> np.ndarray:
     return scene.polygon_tris[scene.polygon_tri_ptr[polygons]]
 
 
-def los_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int, stats: Counter) -> PathBatch:
-    """Line-of-sight paths from every transmitter to every receiver of the tile."""
+def los_tile(
+    scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int, stats: Counter, grazing: np.ndarray
+) -> PathBatch:
+    """Line-of-sight paths from every transmitter to every receiver of the tile.
+
+    ``grazing`` (m, n) bool marks pairs lying on a shadow boundary: their segments are
+    cast in float64.
+    """
     m, n = len(ctx.tx), len(rx)
     ti = np.repeat(np.arange(m), n)
     ri = np.tile(np.arange(n), m)
     a, b = ctx.tx[ti], rx[ri]
     stats["los_candidates"] += len(ti)
     ok = np.linalg.norm(b - a, axis=1) > 0
-    blocked = np.zeros(len(ti), dtype=bool)
-    blocked[ok] = scene.raycaster.occluded(a[ok], b[ok])
-    stats["rays_cast"] += int(ok.sum())
+    blocked = np.ones(len(ti), dtype=bool)
+    blocked[ok] = _occluded_chains(scene, np.stack([a[ok], b[ok]], axis=1), stats, grazing[ti[ok], ri[ok]])
     ok &= ~blocked
     stats["los_rejected_occluded"] += int(blocked.sum())
     k = int(ok.sum())
@@ -69,7 +81,7 @@ def los_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int, sta
 
 
 def reflection_tile(
-    scene: "Scene", ctx: TxContext, order: int, rx: np.ndarray, rx_offset: int, stats: Counter
+    scene: "Scene", ctx: TxContext, order: int, rx: np.ndarray, rx_offset: int, stats: Counter, grazing: np.ndarray
 ) -> list[PathBatch]:
     """Specular paths of one order: image method backwards from each receiver."""
     lv = ctx.levels[order]
@@ -89,7 +101,7 @@ def reflection_tile(
         stats[f"{tag}_rejected_outside_polygon"] += rej["outside_polygon"]
         ri, ci = ri[ok], ci[ok]
         verts = np.concatenate([lv.images[ci, :1], pts, rx[ri][:, None, :]], axis=1)
-        blocked = _occluded_chains(scene, verts, stats)
+        blocked = _occluded_chains(scene, verts, stats, grazing[lv.source[ci], ri])
         stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
         keep = ~blocked
         ri, ci, verts = ri[keep], ci[keep], verts[keep]
@@ -121,6 +133,20 @@ def _join(ctx: TxContext, a: int, keys: np.ndarray) -> tuple[np.ndarray, np.ndar
     return rows, start + offs
 
 
+def _near_boundary(scene: "Scene", test, P: np.ndarray, E: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Candidates whose geometrical-optics ray passes within the float32 uncertainty of the edge.
+
+    The angular distance to the incident shadow boundary (``|phi - phi'| = pi``) or to a
+    reflection boundary (``phi + phi' = pi`` or ``(2n - 1) pi``), times the shorter leg,
+    approximates how close the corresponding GO ray passes to the edge.
+    """
+    delta = 4 * scene.length_tolerance(scene.tolerances.ray_offset)
+    phi, pp, wedge = test.phi, test.phi_prime, test.wedge_angle
+    leg = np.minimum(np.linalg.norm(E - P, axis=1), np.linalg.norm(R - P, axis=1))
+    offs = np.stack([np.abs(phi - pp) - np.pi, phi + pp - np.pi, phi + pp - (2 * wedge - np.pi)], axis=1)
+    return (np.abs(offs).min(axis=1) * leg) < delta
+
+
 def diffraction_tile(
     scene: "Scene",
     ctx: TxContext,
@@ -130,8 +156,14 @@ def diffraction_tile(
     rx_levels: list[ImageLevel],
     rx_offset: int,
     stats: Counter,
+    grazing: np.ndarray,
 ) -> list[PathBatch]:
     """Diffracted paths with ``a`` reflections before and ``b`` after the diffraction.
+
+    Also marks in ``grazing`` (m, n) the (tx, rx) pairs for which a candidate lies within
+    the float32 uncertainty of a shadow or reflection boundary of its edge: the geometrical
+    optics paths of those pairs are then cast in float64, so that the UTD field, whose
+    boundary terms switch by the float64 angles, stays continuous.
 
     The diffraction point is found in closed form (seed §2.3) between the transmitter's
     image of order ``a`` and the receiver's image of order ``b``; FindDihedron (seed
@@ -179,6 +211,10 @@ def diffraction_tile(
             shadow = np.abs(test.phi - test.phi_prime) > np.pi
             stats[f"{tag}_rejected_lit_region"] += int((ok & ~shadow).sum())
             ok &= shadow
+        near = _near_boundary(scene, test, P, E, R) & ok
+        if near.any():
+            grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
+            stats["pairs_on_boundaries"] += int(near.sum())
         e, d, c, P, f0, fn = e[ok], d[ok], c[ok], P[ok], test.face_0[ok], test.face_n[ok]
         # reflections before (transmitter images) and after (receiver images)
         ok1, pre, rej1 = backtrace(scene, P, tx_lv, c)
@@ -214,13 +250,14 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     opts = ctx.options
     stats: Counter = Counter()
     batches: list[PathBatch] = []
-    if opts.los:
-        batches.append(los_tile(scene, ctx, rx, rx_offset, stats))
-    for k in range(1, opts.max_reflections + 1):
-        batches += reflection_tile(scene, ctx, k, rx, rx_offset, stats)
+    grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
         rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers)
         for a in range(opts.diffraction_reflections + 1):
             for b in range(opts.diffraction_reflections + 1 - a):
-                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats)
+                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing)
+    if opts.los:
+        batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
+    for k in range(1, opts.max_reflections + 1):
+        batches += reflection_tile(scene, ctx, k, rx, rx_offset, stats, grazing)
     return batches, stats

@@ -14,8 +14,9 @@ Conventions of the returned data (see ``docs/sionna-notes.md``):
   the same linear polarisation ``a = lambda / (4 pi d)`` (real, positive). The
   phase is carried by the delay: the baseband coefficient is
   ``a * exp(-2j pi f tau)``, so the LOS field is ``lambda/(4 pi d) exp(-j k d)``.
-* ``interactions`` uses wavepaths' codes: :data:`NONE` (0), :data:`REFLECTION`
-  (1, Sionna's specular reflection) and :data:`DIFFRACTION` (2). Paths that
+* ``interactions`` uses wavepaths' codes (:class:`wavepaths.search.paths.InteractionType`):
+  :data:`NONE` (0), :data:`REFLECTION` (1, Sionna's specular reflection) and
+  :data:`DIFFRACTION` (2). Paths that
   contain anything else (refraction, diffuse reflection, sensing) are dropped
   and counted in ``SionnaPaths.excluded``; refraction and diffuse reflection
   are off by default.
@@ -43,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wavepaths.errors import SceneError
+from wavepaths.search.paths import InteractionType
 from wavepaths.validation.sionna_env import ensure_sionna, sionna_version
 
 __all__ = [
@@ -57,11 +59,11 @@ __all__ = [
 ]
 
 #: No interaction (padding after the last interaction of a path).
-NONE: int = 0
+NONE: int = int(InteractionType.NONE)
 #: Specular reflection on a face.
-REFLECTION: int = 1
+REFLECTION: int = int(InteractionType.REFLECTION)
 #: Diffraction on an edge (wedge or free edge).
-DIFFRACTION: int = 2
+DIFFRACTION: int = int(InteractionType.DIFFRACTION)
 
 # Sionna RT 2.2's sionna.rt.constants.InteractionType (bit flags).
 _SIONNA_NONE = 0

@@ -1,0 +1,213 @@
+"""The field carried by each path: Jones matrices chained along the path.
+
+The field is carried as a complex 3-vector transverse to the current propagation
+direction, which avoids any basis bookkeeping between interactions:
+
+* transmitter: ``E = C_theta theta_hat + C_phi phi_hat`` of the departure direction
+  (the antenna pattern, one vector per port);
+* reflection (seed §2.1's coherence form applies the same matrices): with
+  ``e_s = unit(k_i x n)``, ``p = e_s x k``: ``E -> r_te (E.e_s) e_s + r_tm (E.p_i) p_r``
+  (ITU-R P.2040 coefficients, conventions in :mod:`wavepaths.em.fresnel`);
+* diffraction: in KP's edge-fixed bases ``phi' = unit(s' x e)``, ``b0' = s' x phi'``,
+  ``phi = unit(e x s)``, ``b0 = s x phi`` the 2x2 matrix of
+  :func:`wavepaths.em.utd.diffraction_jones` maps ``(E.b0', E.phi')`` to the
+  ``b0``, ``phi`` components of the diffracted field;
+* receiver: ``V = C_rx^* . E`` with ``C_rx`` the receive pattern toward the arriving
+  wave (seen from the receiver).
+
+Spreading: ``1/l`` for a path without diffraction (``l`` its unfolded length); with a
+diffraction, ``1/sqrt(s s' (s + s'))`` with ``s'`` and ``s`` the unfolded lengths before
+and after it (spherical-wave UTD, KP 1974 Table I). The distance parameter is
+``L = s s' sin^2(beta_0) / (s + s')``.
+
+The path coefficient is normalised like Sionna RT's ``Paths.a`` for unit transmit
+power: ``a = (lambda / 4 pi) * spreading * V``, *without* the propagation phase
+``exp(-j 2 pi f tau)`` (apply it with :attr:`FieldResult.a_phased`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..em.antennas import antenna_field
+from ..em.fresnel import reflection_coefficients
+from ..em.polarization import spherical_unit_vectors
+from ..em.utd import diffraction_jones, luebbers_face_coefficients, sionna_face_coefficients
+from ..search.paths import InteractionType, Paths
+from .config import FieldConfig
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...j,...j->...", a, b)
+
+
+def _perp_unit(a: np.ndarray, b: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """unit(a x b), or ``fallback`` where a and b are parallel."""
+    c = np.cross(a, b)
+    n = np.linalg.norm(c, axis=-1, keepdims=True)
+    return np.where(n > 1e-12, c / np.where(n > 0, n, 1.0), fallback)
+
+
+def _apply_reflection(scene: "Scene", cfg: FieldConfig, E: np.ndarray, k_in, k_out, polygon) -> np.ndarray:
+    """Reflect field vectors ``E`` (k, p, 3) on ``polygon`` (k,)."""
+    n = scene.polygon_normal[polygon]
+    cos_t = np.abs(_dot(k_in, n))
+    e_s = _perp_unit(k_in, n, _perp_unit(n, np.array([0.0, 0.0, 1.0]) + 0 * n, np.array([1.0, 0.0, 0.0])))
+    p_i = np.cross(e_s, k_in)
+    p_r = np.cross(e_s, k_out)
+    r_te = np.empty(len(polygon), complex)
+    r_tm = np.empty(len(polygon), complex)
+    mats = scene.polygon_material[polygon]
+    for m in np.unique(mats):
+        sel = mats == m
+        r = reflection_coefficients(scene.materials[m], cfg.frequency_hz, cos_t[sel], cfg.reflection_model)
+        r_te[sel], r_tm[sel] = r.r_te, r.r_tm
+    es = _dot(E, e_s[:, None, :])
+    ep = _dot(E, p_i[:, None, :])
+    return (r_te[:, None] * es)[..., None] * e_s[:, None, :] + (r_tm[:, None] * ep)[..., None] * p_r[:, None, :]
+
+
+def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int):
+    """UTD angles of the diffraction at interaction ``j`` of paths ``rows``.
+
+    Returns
+    -------
+    dict with ``e`` (k, 3) edge unit vector, ``phi``, ``phi_prime``, ``beta_0``, ``n``
+    (k,), ``s_in`` and ``s_out`` (k, 3) propagation directions, ``face_0`` and ``face_n``
+    (k,) indices into the dihedra's face arrays.
+    """
+    dih = scene.dihedra
+    d = paths.primitive[rows, j]
+    f0 = paths.wedge_faces[rows, 0]
+    fn = paths.wedge_faces[rows, 1]
+    e = dih.direction[d]
+    v = paths.vertices[rows]
+    prev, p, nxt = v[:, j], v[:, j + 1], v[:, j + 2]
+    s_in = _unit(p - prev)
+    s_out = _unit(nxt - p)
+    x = dih.face_direction[f0]
+    y = np.cross(e, x)
+
+    def angle(vec):
+        return np.mod(np.arctan2(_dot(vec, y), _dot(vec, x)), 2 * np.pi)
+
+    wedge = angle(dih.face_direction[fn])
+    wedge = np.where(wedge < 1e-9, 2 * np.pi, wedge)
+    return {
+        "e": e,
+        "phi_prime": angle(prev - p),
+        "phi": angle(nxt - p),
+        "beta_0": np.arccos(np.clip(_dot(s_in, e), -1.0, 1.0)),
+        "n": wedge / np.pi,
+        "s_in": s_in,
+        "s_out": s_out,
+        "face_0": f0,
+        "face_n": fn,
+    }
+
+
+def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, j, s_before, s_after) -> np.ndarray:
+    g = wedge_geometry(scene, paths, rows, j)
+    e, s_in, s_out = g["e"], g["s_in"], g["s_out"]
+    k = cfg.wavenumber
+    L = s_before * s_after / (s_before + s_after) * np.sin(g["beta_0"]) ** 2
+    dih = scene.dihedra
+    mat0 = scene.triangle_material[dih.face_triangle[g["face_0"]]]
+    matn = scene.triangle_material[dih.face_triangle[g["face_n"]]]
+    jones = np.empty((len(rows), 2, 2), complex)
+    for m0, mn in set(zip(mat0.tolist(), matn.tolist())):
+        sel = (mat0 == m0) & (matn == mn)
+        args = (g["phi"][sel], g["phi_prime"][sel], g["beta_0"][sel], g["n"][sel])
+        if cfg.compat == "sionna":
+            r = sionna_face_coefficients(scene.materials[m0], cfg.frequency_hz, args[1], args[2], args[3])
+            jones[sel] = diffraction_jones(*args, k, L[sel], "sionna", *r)
+        else:
+            r = luebbers_face_coefficients(scene.materials[m0], scene.materials[mn], cfg.frequency_hz, args[0],
+                                           args[1], args[3], cfg.reflection_model, beta_0=args[2])
+            jones[sel] = diffraction_jones(*args, k, L[sel], cfg.model, *r)
+    x_fallback = dih.face_direction[g["face_0"]]
+    phi_in = _perp_unit(s_in, e, x_fallback)
+    b_in = np.cross(s_in, phi_in)
+    phi_out = _perp_unit(e, s_out, x_fallback)
+    b_out = np.cross(s_out, phi_out)
+    cb = _dot(E, b_in[:, None, :])
+    cp = _dot(E, phi_in[:, None, :])
+    ob = jones[:, None, 0, 0] * cb + jones[:, None, 0, 1] * cp
+    op = jones[:, None, 1, 0] * cb + jones[:, None, 1, 1] * cp
+    return ob[..., None] * b_out[:, None, :] + op[..., None] * phi_out[:, None, :]
+
+
+def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Field vectors at the receiver and the spreading factor of each path.
+
+    Returns
+    -------
+    E : (N, Pt, 3) complex128
+        Field at the receiver per transmit port, for unit pattern amplitude normalisation
+        (before spreading and the lambda / 4 pi factor).
+    spreading : (N,) float64 [1/m]
+    """
+    n = len(paths)
+    seg = paths.segment_lengths  # (N, D + 1)
+    dirs = np.diff(paths.vertices, axis=1)
+    dirs = dirs / np.where(seg > 0, seg, 1.0)[..., None]
+    c_tx = antenna_field(cfg.tx_antenna, paths.departure_directions)  # (N, Pt, 2)
+    basis = spherical_unit_vectors(paths.departure_directions)
+    E = c_tx[..., 0:1] * basis.theta_hat[:, None, :] + c_tx[..., 1:2] * basis.phi_hat[:, None, :]
+    total = seg.sum(axis=1)
+    spreading = 1.0 / total
+    before = np.cumsum(seg, axis=1)  # length up to the end of segment i
+    for j in range(paths.max_depth):
+        kind = paths.interactions[:, j]
+        refl = np.nonzero(kind == InteractionType.REFLECTION)[0]
+        if len(refl):
+            E[refl] = _apply_reflection(scene, cfg, E[refl], dirs[refl, j], dirs[refl, j + 1], paths.primitive[refl, j])
+        diff = np.nonzero(kind == InteractionType.DIFFRACTION)[0]
+        if len(diff):
+            s_before = before[diff, j]
+            s_after = total[diff] - s_before
+            E[diff] = _apply_diffraction(scene, cfg, E[diff], paths, diff, j, s_before, s_after)
+            spreading[diff] = 1.0 / np.sqrt(s_before * s_after * (s_before + s_after))
+    return E, spreading
+
+
+def path_coefficients(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndarray:
+    """Complex path coefficients ``a`` (N, Pr, Pt), normalised like Sionna RT's ``Paths.a``.
+
+    ``a = (lambda / 4 pi) * spreading * C_rx^H E``; no ``exp(-j 2 pi f tau)`` phase.
+    """
+    E, spreading = path_field_vectors(scene, paths, cfg)
+    toward = -paths.arrival_directions
+    c_rx = antenna_field(cfg.rx_antenna, toward)  # (N, Pr, 2)
+    basis = spherical_unit_vectors(toward)
+    C = c_rx[..., 0:1] * basis.theta_hat[:, None, :] + c_rx[..., 1:2] * basis.phi_hat[:, None, :]  # (N, Pr, 3)
+    v = np.einsum("nrj,ntj->nrt", np.conj(C), E)
+    return (cfg.wavelength / (4 * np.pi)) * spreading[:, None, None] * v
+
+
+def transfer_matrices(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndarray:
+    """Path transfer matrices T (N, 2, 2) from (theta_hat, phi_hat) at departure to
+    (theta_hat, phi_hat) of the arrival direction, including spreading and lambda/4 pi.
+
+    With them a source's coherence matrix J propagates as ``T J T^H`` (seed §2.1).
+    """
+    from ..em.antennas import Antenna
+
+    vcfg = FieldConfig(cfg.frequency_hz, cfg.model, cfg.compat, cfg.reflection_model,
+                       Antenna("iso", "VH"), Antenna("iso", "VH"), cfg.tx_power_dbm)
+    E, spreading = path_field_vectors(scene, paths, vcfg)  # ports: theta, phi unit fields
+    basis = spherical_unit_vectors(paths.arrival_directions)
+    out = np.empty((len(paths), 2, 2), complex)
+    out[:, 0, :] = _dot(E, basis.theta_hat[:, None, :])
+    out[:, 1, :] = _dot(E, basis.phi_hat[:, None, :])
+    return (cfg.wavelength / (4 * np.pi)) * spreading[:, None, None] * out

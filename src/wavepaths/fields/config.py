@@ -1,0 +1,82 @@
+"""Field settings: frequency, diffraction model, antennas, transmit power."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from scipy.constants import speed_of_light
+
+from ..em.antennas import Antenna
+from ..errors import WavepathsError
+
+DiffractionModel = Literal["utd", "gtd"]
+Compat = Literal["none", "sionna"]
+ReflectionModel = Literal["slab", "half_space"]
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """How to turn path geometry into complex path coefficients.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Carrier frequency [Hz].
+    model : {"utd", "gtd"}
+        Diffraction coefficients: Kouyoumjian-Pathak UTD with Luebbers' face
+        reflection coefficients for finitely conducting faces ("utd"), or Keller's
+        non-uniform GTD ("gtd", diverges at shadow and reflection boundaries).
+    compat : {"none", "sionna"}
+        "sionna" replaces the diffraction matrix by Sionna RT 2.2's combination
+        (``R0 (d1 - d4) + Rn (d2 - d3)``, see docs/sionna-diffraction.md) so that the rest
+        of the chain can be compared with Sionna RT like for like. Not physics: the
+        textbook model is the default.
+    reflection_model : {"slab", "half_space"}
+        Reflection off a material: ITU-R P.2040 single-layer slab of the material's
+        thickness (as Sionna RT), or a half-space.
+    tx_antenna, rx_antenna : Antenna
+    tx_power_dbm : float
+        Transmit power for received power and field strength [dBm].
+    """
+
+    frequency_hz: float = 3.5e9
+    model: DiffractionModel = "utd"
+    compat: Compat = "none"
+    reflection_model: ReflectionModel = "slab"
+    tx_antenna: Antenna = field(default_factory=Antenna)
+    rx_antenna: Antenna = field(default_factory=Antenna)
+    tx_power_dbm: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (self.frequency_hz > 0 and self.frequency_hz < 1e13):
+            raise WavepathsError(f"`frequency_hz` must be in (0, 1e13) Hz, got {self.frequency_hz}")
+        if self.model not in ("utd", "gtd"):
+            raise WavepathsError(f"`model` must be one of ('utd', 'gtd'), got {self.model!r}")
+        if self.compat not in ("none", "sionna"):
+            raise WavepathsError(f"`compat` must be one of ('none', 'sionna'), got {self.compat!r}")
+        if self.reflection_model not in ("slab", "half_space"):
+            raise WavepathsError(f"`reflection_model` must be one of ('slab', 'half_space'), got {self.reflection_model!r}")
+
+    @property
+    def wavelength(self) -> float:
+        """Free-space wavelength [m]."""
+        return speed_of_light / self.frequency_hz
+
+    @property
+    def wavenumber(self) -> float:
+        """Free-space wavenumber k = 2 pi / lambda [rad/m]."""
+        return 2.0 * 3.141592653589793 / self.wavelength
+
+    @classmethod
+    def from_cli(cls, args) -> "FieldConfig":
+        """From the ``paths`` / ``coverage`` command-line flags."""
+        ant = Antenna(pattern=getattr(args, "antenna", "iso"), polarization=getattr(args, "polarization", "V"))
+        return cls(
+            frequency_hz=args.frequency,
+            model=args.model,
+            compat=getattr(args, "compat", "none"),
+            tx_antenna=ant,
+            rx_antenna=ant,
+            tx_power_dbm=args.tx_power_dbm,
+        )
