@@ -65,6 +65,13 @@ def test_transition_function_limits() -> None:
         transition_function(-1.0)
 
 
+@settings(max_examples=300, deadline=None)
+@given(x=st.floats(0.0, 1e300))
+def test_transition_function_finite_and_bounded(x: float) -> None:
+    f = transition_function(x)
+    assert np.isfinite(f) and abs(f) <= 1.0 + 1e-12  # |F| rises monotonically from 0 to 1
+
+
 # ------------------------------------------------------------------ KP / Keller tables
 K_REF = 2 * np.pi  # wavelength 1 m
 

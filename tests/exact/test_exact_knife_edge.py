@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.special import erfc
 
 from wavepaths.em.utd import boundary_offsets, kp_coefficients
@@ -88,3 +90,11 @@ def test_pec_half_plane_brackets_knife_edge() -> None:
         assert abs(0.5 * (ls + lh) - j) < 0.05
         if nu <= 2.5:
             assert abs(ls - j) <= 0.5 and abs(lh - j) <= 0.5
+
+
+@settings(max_examples=200, deadline=None)
+@given(nu=st.floats(-1e6, 1e6))
+def test_knife_edge_finite(nu: float) -> None:
+    e = knife_edge_field(nu)
+    j = knife_edge_loss_db(nu)
+    assert np.isfinite(e) and np.isfinite(j) and abs(e) < 1.2  # max |E/E0| = 1.17 at nu ~ -1.2

@@ -171,3 +171,19 @@ def test_lit_region_option_keeps_only_shadow_diffraction():
     top = lambda p: {int(p.rx_index[i]) for i in range(len(p)) if p.depth[i] == 1 and abs(p.vertices[i, 1, 2]) < 1e-12}
     assert top(full) == {0, 1, 2}
     assert top(shadow) == {0}  # receiver 0 is behind the screen; 1 sees the tx; 2 is on the tx side
+
+
+def test_transmitter_inside_a_closed_room_warns_and_finds_the_inner_reflections():
+    from wavepaths.scene import WavepathsWarning
+
+    from ..conftest import boxes_scene
+
+    s = boxes_scene([((0, 0, 0), (10, 8, 4))])  # a closed room
+    tx, rx = np.array([[2.0, 3.0, 1.5]]), np.array([[7.0, 5.0, 1.2]])
+    with pytest.warns(WavepathsWarning, match="inside closed object"):
+        p = trace(s, tx, rx, TraceOptions(max_reflections=1, diffraction=False))
+    # line of sight and one reflection on each of the six walls, lengths by the image method
+    assert sorted(p.depth.tolist()) == [0, 1, 1, 1, 1, 1, 1]
+    images = [tx[0] * [-1, 1, 1], tx[0] * [1, -1, 1], tx[0] * [1, 1, -1],
+              tx[0] * [-1, 1, 1] + [20, 0, 0], tx[0] * [1, -1, 1] + [0, 16, 0], tx[0] * [1, 1, -1] + [0, 0, 8]]
+    np.testing.assert_allclose(np.sort(p.lengths[p.depth == 1]), np.sort([np.linalg.norm(rx[0] - i) for i in images]))

@@ -95,17 +95,37 @@ def _root(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> NDArray[np.com
     return np.sqrt((eta - 1.0) + c * c)
 
 
-def _half_space(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> FresnelCoefficients:
-    # Eq. (37) rationalised (multiply numerator and denominator by the denominator), using
-    # c^2 - root^2 = 1 - eta: no cancellation, and exactly 0 for eta == 1.
+class _HalfSpaceParts(NamedTuple):
+    r_te: NDArray[np.complex128]
+    r_tm: NDArray[np.complex128]
+    one_minus_sq_te: NDArray[np.complex128]  # 1 - r_te^2, without cancellation
+    one_minus_sq_tm: NDArray[np.complex128]  # 1 - r_tm^2
+
+
+def _half_space_parts(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> _HalfSpaceParts:
+    """Eq. (37) in rationalised form, with no cancellation near eta = 1 or grazing.
+
+    With ``root^2 = eta - 1 + c^2``: ``r_te = (1 - eta)/(c + root)^2``,
+    ``r_tm = (eta - 1)((eta + 1)c^2 - 1)/(eta c + root)^2``,
+    ``1 - r_te^2 = 4 c root/(c + root)^2`` and ``1 - r_tm^2 = 4 eta c root/(eta c + root)^2``.
+    """
     root = _root(eta, c)
     den_te = (c + root) ** 2
     den_tm = (eta * c + root) ** 2
     # den ~ 0 only for eta ~ 1 at grazing: no interface, r = 0 (avoids subnormal division).
     same = (eta == 1.0) | (np.abs(den_te) < _TINY) | (np.abs(den_tm) < _TINY)
-    r_te = (1.0 - eta) / np.where(same, 1.0, den_te)
-    r_tm = (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) / np.where(same, 1.0, den_tm)
-    return FresnelCoefficients(np.where(same, 0.0, r_te), np.where(same, 0.0, r_tm))
+    d_te = np.where(same, 1.0, den_te)
+    d_tm = np.where(same, 1.0, den_tm)
+    r_te = np.where(same, 0.0, (1.0 - eta) / d_te)
+    r_tm = np.where(same, 0.0, (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) / d_tm)
+    om_te = np.where(same, 1.0, 4.0 * c * root / d_te)
+    om_tm = np.where(same, 1.0, 4.0 * eta * c * root / d_tm)
+    return _HalfSpaceParts(r_te, r_tm, om_te, om_tm)
+
+
+def _half_space(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> FresnelCoefficients:
+    p = _half_space_parts(eta, c)
+    return FresnelCoefficients(p.r_te, p.r_tm)
 
 
 def fresnel_half_space(eta: ArrayLike, cos_theta: ArrayLike) -> FresnelCoefficients:
@@ -143,18 +163,20 @@ def _slab(
 ) -> SlabCoefficients:
     root = _root(eta, c)
     q = (2.0 * np.pi * thickness_m / wavelength_m) * root  # eq. (44)
-    r_te_p, r_tm_p = _half_space(eta, c)
+    hs = _half_space_parts(eta, c)
     e1 = np.exp(-1j * q)  # |e1| <= 1 because Im(root) <= 0 for Im(eta) <= 0
     e2 = e1 * e1
+    one_minus_e2 = -np.expm1(-2j * q)  # accurate for thin slabs
     out = []
-    for rp in (r_te_p, r_tm_p):
-        den = 1.0 - rp * rp * e2
+    for rp, om in ((hs.r_te, hs.one_minus_sq_te), (hs.r_tm, hs.one_minus_sq_tm)):
+        # 1 - rp^2 e2 = (1 - e2) + (1 - rp^2) e2: no cancellation for thin slabs or grazing.
+        den = one_minus_e2 + om * e2
         # |den| ~ 0 only at exact grazing (|rp| = 1) with e2 ~ 1: there the limit is R = rp,
         # T = 0 whatever q. The threshold keeps complex division away from subnormals.
         bad = np.abs(den) < _TINY
         den = np.where(bad, 1.0, den)
-        r = np.where(bad, rp, rp * (1.0 - e2) / den)  # eq. (43a)
-        t = np.where(bad, 0.0, (1.0 - rp * rp) * e1 / den)  # eq. (43b)
+        r = np.where(bad, rp, rp * one_minus_e2 / den)  # eq. (43a)
+        t = np.where(bad, 0.0, om * e1 / den)  # eq. (43b)
         out.append((r, t))
     (r_te, t_te), (r_tm, t_tm) = out
     return SlabCoefficients(r_te, r_tm, t_te, t_tm)

@@ -141,6 +141,20 @@ class Scene:
         return default_raycaster(self)
 
     @functools.cached_property
+    def outward_sign(self) -> np.ndarray:
+        """(p,) float64: +1/-1 if a polygon's normal points out of/into its closed object, 0 if open."""
+        from .closed import outward_polygon_sign
+
+        return outward_polygon_sign(self)
+
+    @functools.cached_property
+    def hidden_polygons(self) -> np.ndarray:
+        """(p,) bool: contact faces lying inside a coplanar polygon of another object."""
+        from .closed import hidden_polygons
+
+        return hidden_polygons(self)
+
+    @functools.cached_property
     def exact_raycaster(self) -> "RayCaster":
         """Float64 occlusion (numpy), for the few segments that graze an edge."""
         from ..raycast.numpy_caster import NumpyRayCaster

@@ -10,6 +10,9 @@ it complete (no valid path is lost) while dropping sequences that cannot carry a
 * after reflecting on ``p``, the wave travels on the side of ``p`` where the previous
   image lies, so the next mirror ``q`` must reach into that half-space (tested with
   ``q``'s bounding sphere: conservative, hence complete);
+* a polygon of a closed object reflects only waves arriving from outside the object
+  (unless a source is inside it), and contact faces (a building's floor on the ground)
+  never reflect (:mod:`wavepaths.scene.closed`);
 * the reflected wave seems to come from the image ``I`` through ``p``, so ``q`` must meet
   the cone from ``I`` that contains ``p``'s bounding sphere (a beam test on bounding
   spheres: conservative, hence complete).
@@ -23,6 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import WavepathsError
+from ..scene.closed import points_inside_closed
 from .geometry import mirror_points, segment_plane_intersection
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -79,11 +83,26 @@ def polygon_spheres(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
 
 
 def reflecting_polygons(scene: "Scene", skip_absorbers: bool) -> np.ndarray:
-    """(p,) bool: polygons that may reflect."""
-    if not skip_absorbers:
-        return np.ones(scene.num_polygons, dtype=bool)
-    absorber = np.array([m.kind == "absorber" for m in scene.materials], dtype=bool)
-    return ~absorber[scene.polygon_material]
+    """(p,) bool: polygons that may reflect (not absorbers when skipped, not hidden contact faces)."""
+    keep = ~scene.hidden_polygons
+    if skip_absorbers:
+        absorber = np.array([m.kind == "absorber" for m in scene.materials], dtype=bool)
+        keep &= ~absorber[scene.polygon_material]
+    return keep
+
+
+def one_sided_signs(scene: "Scene", sources: np.ndarray) -> np.ndarray:
+    """(p,) float: outward sign of polygons of closed objects that contain none of ``sources``.
+
+    Such a polygon reflects only a wave whose apparent source lies on its outer side;
+    0 marks polygons that reflect on both sides (open objects, or a closed object with a
+    source inside it).
+    """
+    sign = scene.outward_sign.copy()
+    if (sign != 0).any() and len(sources):
+        inside = points_inside_closed(scene, sources).any(axis=0)
+        sign[inside[scene.polygon_object]] = 0.0
+    return sign
 
 
 def build_image_levels(
@@ -115,6 +134,7 @@ def build_image_levels(
     d = scene.polygon_offset
     centre, radius = polygon_spheres(scene)
     mirrors = np.nonzero(reflecting_polygons(scene, skip_absorbers))[0]
+    outward = one_sided_signs(scene, sources)
     for k in range(1, max_order + 1):
         lv = levels[-1]
         c = len(lv)
@@ -127,7 +147,9 @@ def build_image_levels(
         chain = np.repeat(np.arange(c), len(mirrors))
         q = np.tile(mirrors, c)
         parent = lv.last[chain]
-        keep = np.abs(np.einsum("ij,ij->i", parent, n[q]) - d[q]) > tol
+        side = np.einsum("ij,ij->i", parent, n[q]) - d[q]
+        keep = np.abs(side) > tol
+        keep &= (outward[q] == 0) | (outward[q] * side > 0)  # closed objects: from outside only
         if k >= 2:
             p = lv.polygons[chain, -1]
             before = lv.images[chain, -2]  # the image the wave came from before reflecting on p

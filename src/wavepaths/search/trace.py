@@ -47,6 +47,35 @@ def check_positions(name: str, value, allow_empty: bool = False) -> np.ndarray:
     return arr
 
 
+INSIDE_CHECK_BUDGET = 50_000_000  # (points x triangles of closed objects) tested for the warning
+
+
+def _warn_inside(scene: Scene, tx: np.ndarray, rx: np.ndarray) -> None:
+    """Warn when a transmitter or receiver lies inside a closed object (paths are still traced)."""
+    import warnings
+
+    from ..scene.closed import closed_objects, points_inside_closed
+    from ..scene.model import WavepathsWarning
+
+    closed = closed_objects(scene)
+    if not closed.any():
+        return
+    tris = int(np.isin(scene.triangle_object, np.nonzero(closed)[0]).sum())
+    for name, pts in (("transmitter", tx), ("receiver", rx)):
+        if len(pts) * tris > INSIDE_CHECK_BUDGET:
+            continue
+        inside = points_inside_closed(scene, pts)
+        rows = np.nonzero(inside.any(axis=1))[0]
+        if len(rows):
+            objs = sorted({scene.object_names[o] for o in np.nonzero(inside[rows].any(axis=0))[0]})
+            warnings.warn(
+                f"{len(rows)} {name}(s) inside closed object(s) {', '.join(objs)} (first: row {rows[0]}); "
+                "only the paths that exist from there are returned",
+                WavepathsWarning,
+                stacklevel=3,
+            )
+
+
 def trace(
     scene: Scene,
     tx,
@@ -99,6 +128,7 @@ def trace(
     if (diff <= scene.length_tolerance(scene.tolerances.weld)).any():
         i, j = np.argwhere(diff <= scene.length_tolerance(scene.tolerances.weld))[0]
         raise WavepathsError(f"transmitter {i} and receiver {j} are at the same position {tx[i].tolist()}")
+    _warn_inside(scene, tx, rx)
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
     stats: Counter = Counter(ctx.stats)
     batches = []
