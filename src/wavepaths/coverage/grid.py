@@ -37,7 +37,7 @@ def _pair(value):
     return [value, value] if np.ndim(value) == 0 else value
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PlanarGrid:
     """A rectangle of ``ny x nx`` equal cells; receivers at the cell centres.
 

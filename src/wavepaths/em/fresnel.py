@@ -1,4 +1,7 @@
-"""Fresnel reflection and transmission coefficients (ITU-R P.2040-3).
+"""Fresnel reflection and transmission coefficients (ITU-R P.2040).
+
+Equation numbers are those of P.2040-3 as cited by the brief and by Sionna RT (which cites
+the same numbers for P.2040-4): eq. (37) half-space, eqs. (43)-(44) single-layer slab.
 
 Time factor ``exp(+jwt)``; the incident wave comes from vacuum; ``eta`` is the complex
 relative permittivity of the material (``Im eta <= 0`` for a lossy medium).

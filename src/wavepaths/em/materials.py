@@ -1,7 +1,6 @@
 """Radio materials: ITU-R P.2040 permittivity model, PEC, absorber, Sionna RT names.
 
-The complex relative permittivity follows ITU-R P.2040-3, section 2.1.4, eqs. (28)-(31)
-and Table 3, with the time factor ``exp(+jwt)`` of ``docs/conventions.md``::
+The complex relative permittivity follows ITU-R P.2040-3, section 2.1.4 and Table 3, with the time factor ``exp(+jwt)`` of ``docs/conventions.md``::
 
     eps_r' = a * f_GHz**b
     sigma  = c * f_GHz**d                       [S/m]
@@ -177,7 +176,7 @@ def relative_permittivity(
 ) -> complex | NDArray[np.complex128]:
     """Complex relative permittivity ``eta = eps_r' - j sigma/(omega eps_0)``.
 
-    ITU-R P.2040-3 eqs. (28)-(31) and Table 3, time factor ``exp(+jwt)``.
+    ITU-R P.2040-3 section 2.1.4 and Table 3, time factor ``exp(+jwt)``.
 
     Parameters
     ----------

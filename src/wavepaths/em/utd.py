@@ -21,7 +21,7 @@ Numerics. Each of the four terms ``cot((pi +- beta)/2n) F(kL a^{+-}(beta))`` equ
 evaluated as ``sgn(eps) n sqrt(2kL) cos(eps/2n) [sinc(eps/2pi)/sinc(eps/2n pi)]
 G(2kL sin^2(eps/2))`` with ``G(x) = F(x)/sqrt(x)``, which has no cancellation and no
 0 * inf anywhere; at ``eps = 0`` exactly it is 0, the mean of the one-sided limits
-``+-n sqrt(2 pi kL) e^{j pi/4}`` (KP 1974 eq. 29 boundary limit), to pair with a GO weight
+``+-n sqrt(2 pi kL) e^{j pi/4}`` (the boundary limit of KP 1974), to pair with a GO weight
 of 1/2 exactly on the boundary.
 """
 
@@ -101,7 +101,7 @@ def _g(x: Array) -> CArray:
 
 
 def transition_function(x: ArrayLike) -> CArray:
-    """UTD transition function of Kouyoumjian & Pathak (1974), eq. (25).
+    """UTD transition function F of Kouyoumjian & Pathak (Proc. IEEE 62(11), 1974).
 
     ::
 
@@ -180,7 +180,7 @@ class BoundaryOffsets(NamedTuple):
 
 
 def boundary_offsets(phi: ArrayLike, phi_prime: ArrayLike, n: ArrayLike) -> BoundaryOffsets:
-    """The offsets ``eps = pi +- beta - 2 pi n N^{+-}`` of the KP terms (KP 1974 eq. 26).
+    """The offsets ``eps = pi +- beta - 2 pi n N^{+-}`` of the KP terms (Kouyoumjian & Pathak 1974).
 
     ``N^{+-} = round((beta +- pi) / (2 pi n))`` with ``beta = phi -+ phi'``. A GO
     computation that wants to agree *bit for bit* with the diffraction coefficients on
@@ -200,7 +200,7 @@ def _epsilons(phi: Array, phi_prime: Array, n: Array) -> tuple[Array, Array, Arr
 
     D1: cot((pi+b-)/2n) F(kL a+(b-)), D2: cot((pi-b-)/2n) F(kL a-(b-)),
     D3: cot((pi+b+)/2n) F(kL a+(b+)), D4: cot((pi-b+)/2n) F(kL a-(b+)); b-+ = phi -+ phi'.
-    N+- = round((b +- pi)/(2 pi n)) (KP eq. 26). D2 vanishes on the incident shadow
+    N+- = round((b +- pi)/(2 pi n)) (KP 1974). D2 vanishes on the incident shadow
     boundary phi = phi' + pi, D1 on phi = phi' - pi, D4 on the 0-face reflection boundary
     phi = pi - phi', D3 on the n-face one phi = (2n-1) pi - phi'.
     """
@@ -232,7 +232,7 @@ def _cot_floored(eps: Array, n: Array, floor: float) -> Array:
 
 
 def _prefactor(n: Array, k: Array, beta_0: Array, sin_beta_0_floor: float) -> CArray:
-    """-e^{-j pi/4} / (2 n sqrt(2 pi k) sin beta_0), KP eq. (23), sin beta_0 floored."""
+    """-e^{-j pi/4} / (2 n sqrt(2 pi k) sin beta_0), KP 1974, sin beta_0 floored."""
     sb = np.maximum(np.abs(np.sin(beta_0)), sin_beta_0_floor)
     return -np.exp(-0.25j * np.pi) / (2.0 * n * np.sqrt(2.0 * np.pi * k) * sb)
 
@@ -306,7 +306,7 @@ def kp_coefficients(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
     L: ArrayLike, *, sin_beta_0_floor: float = 1e-6,
 ) -> WedgeCoefficients:
-    """Kouyoumjian & Pathak (Proc. IEEE 62(11):1448-1461, 1974) PEC wedge, eqs. (23)-(27).
+    """Kouyoumjian & Pathak (Proc. IEEE 62(11):1448-1461, 1974) PEC wedge coefficient.
 
     ::
 

@@ -1,6 +1,6 @@
 """ITU-R P.526 single knife edge: exact Fresnel-Kirchhoff (absorbing screen) diffraction.
 
-ITU-R P.526-15, section 4.1, eqs. (26)-(27) and the Fresnel integrals of section 2.7.
+ITU-R P.526-15, section 4.1 (single knife edge) and the Fresnel integrals of section 2.7.
 Time factor ``exp(+jwt)`` (``docs/conventions.md``): an extra path delay is ``exp(-jk dl)``.
 """
 
@@ -16,7 +16,7 @@ __all__ = ["fresnel_nu", "knife_edge_field", "knife_edge_loss_db"]
 
 
 def fresnel_nu(h: ArrayLike, d1: ArrayLike, d2: ArrayLike, wavelength: ArrayLike) -> NDArray[np.float64]:
-    """Fresnel-Kirchhoff diffraction parameter, ITU-R P.526 eq. (22).
+    """Fresnel-Kirchhoff diffraction parameter of ITU-R P.526 (first of its four equivalent forms).
 
     ``nu = h sqrt(2 (d1 + d2) / (lambda d1 d2))``.
 
@@ -67,7 +67,7 @@ def knife_edge_field(nu: ArrayLike) -> NDArray[np.complex128]:
 
 
 def knife_edge_loss_db(nu: ArrayLike) -> NDArray[np.float64]:
-    """Knife-edge diffraction loss ``J(nu)`` [dB] relative to free space, P.526 eq. (26).
+    """Knife-edge diffraction loss ``J(nu)`` [dB] relative to free space, ITU-R P.526 section 4.1.
 
     ``J(nu) = -20 log10( sqrt((1 - C - S)^2 + (C - S)^2) / 2 ) = -20 log10 |E/E0|``;
     ``J(0) = 20 log10(2) = 6.0206 dB``, ``J -> 0`` for ``nu -> -inf``.
