@@ -51,8 +51,10 @@ def _series_chunk(
         bessel_u = np.where(bad, 0.0, bessel_u)  # far past the turning point: negligible
         bessel = bessel_u[inverse.ravel()]
         tail = np.abs(bessel_u[:, -5:])
-        if np.all(tail < _SERIES_TAIL) or m_count > 100_000:
+        if np.all(tail < _SERIES_TAIL):
             break
+        if m_count > 100_000:
+            raise WavepathsError(f"wedge series did not converge within {m_count} terms")
         m_count *= 2
     eps_m = np.where(m == 0, 1.0, 2.0)
     coef = eps_m * np.exp(0.5j * np.pi * nu) * bessel

@@ -116,8 +116,27 @@ def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int):
     }
 
 
+def _sionna_face_order(g: dict) -> dict:
+    """Relabel the wedge as Sionna RT 2.2 does: its 0-face is the face whose normal faces
+    the incoming ray (``phi' < pi``). Swapping faces maps ``phi -> n pi - phi``,
+    ``phi' -> n pi - phi'`` and reverses the edge vector (docs/sionna-diffraction.md §1)."""
+    swap = g["phi_prime"] > np.pi
+    if not swap.any():
+        return g
+    g = dict(g)
+    npi = g["n"] * np.pi
+    g["phi"] = np.where(swap, npi - g["phi"], g["phi"])
+    g["phi_prime"] = np.where(swap, npi - g["phi_prime"], g["phi_prime"])
+    g["e"] = np.where(swap[:, None], -g["e"], g["e"])
+    g["beta_0"] = np.where(swap, np.pi - g["beta_0"], g["beta_0"])
+    g["face_0"], g["face_n"] = np.where(swap, g["face_n"], g["face_0"]), np.where(swap, g["face_0"], g["face_n"])
+    return g
+
+
 def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, j, s_before, s_after) -> np.ndarray:
     g = wedge_geometry(scene, paths, rows, j)
+    if cfg.compat == "sionna":
+        g = _sionna_face_order(g)
     e, s_in, s_out = g["e"], g["s_in"], g["s_out"]
     k = cfg.wavenumber
     L = s_before * s_after / (s_before + s_after) * np.sin(g["beta_0"]) ** 2

@@ -1,0 +1,297 @@
+"""The coverage map: per-cell sums of path coefficients, and what is read from them.
+
+A :class:`CoverageMap` keeps, per mechanism, transmitter and cell, the sums that every
+quantity derives from (so that a map can be re-read as coherent or incoherent, per
+transmitter or best server, without tracing again):
+
+* ``a_total`` — ``sum a e^{-j 2 pi f tau}`` over all paths of the cell, in path order
+  (the same sum as :meth:`wavepaths.fields.FieldResult.path_gain`);
+* ``a_sum`` — the same sum restricted to one mechanism;
+* ``power_sum`` — ``sum |a|^2`` per mechanism (the incoherent split, which adds up
+  exactly to the incoherent total);
+* ``num_paths`` — how many paths of each mechanism reach the cell.
+
+Mechanisms (:data:`MECHANISMS`): line of sight (no interaction), reflection (one or more
+specular reflections only), diffraction (a path with an edge diffraction, with or
+without reflections).
+
+Cells whose centre lies inside a solid object are NaN in every quantity (``inside``);
+cells that no path reaches have zero gain, ``-inf`` dB. ``.npz`` files written by
+:meth:`CoverageMap.save` hold the derived maps in dB and the raw sums, with the settings
+as JSON under ``metadata``; :meth:`CoverageMap.load` restores the map.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ..errors import WavepathsError
+from ..fields.result import ETA_0, power_db
+from .grid import Grid, MeshGrid, PlanarGrid
+
+MECHANISMS = ("los", "reflection", "diffraction")
+Mechanism = Literal["los", "reflection", "diffraction"]
+FORMAT_VERSION = 1
+SPEED_OF_LIGHT = 299_792_458.0
+
+
+def field_strength_dbuv_m(received_power_dbm: np.ndarray, frequency_hz: float) -> np.ndarray:
+    """Field strength [dBuV/m] seen by an isotropic receiver that gets ``received_power_dbm``.
+
+    As :meth:`wavepaths.fields.FieldResult.field_strength`: the effective area
+    ``lambda^2 / 4 pi`` gives ``E = sqrt(eta_0 P_r 4 pi) / lambda`` [V/m]; in decibels
+    ``E_dBuV/m = P_dBm - 30 + 10 log10(4 pi eta_0) - 20 log10(lambda) + 120``.
+    ``-inf`` and NaN pass through.
+    """
+    lam = SPEED_OF_LIGHT / frequency_hz
+    return np.asarray(received_power_dbm) + (90.0 + 10 * np.log10(4 * np.pi * ETA_0) - 20 * np.log10(lam))
+
+
+@dataclass(frozen=True, eq=False)
+class CoverageMap:
+    """A coverage map over a :class:`PlanarGrid` or :class:`MeshGrid`.
+
+    ``shape`` is the grid's: ``(ny, nx)`` for a planar grid, ``(f,)`` for a mesh.
+
+    Attributes
+    ----------
+    grid : PlanarGrid or MeshGrid
+    cell_centers : shape + (3,) float64 [m]
+        Receiver position of each cell.
+    inside : shape bool
+        Cells inside a solid object: NaN in every quantity, not traced.
+    tx_positions : (m, 3) float64 [m]
+    a_total : (m,) + shape complex128
+        ``sum a e^{-j 2 pi f tau}`` over the cell's paths (first port pair), unit
+        transmit power.
+    a_sum : (3, m) + shape complex128
+        The same per mechanism (:data:`MECHANISMS` order).
+    power_sum : (3, m) + shape float64
+        ``sum |a|^2`` per mechanism.
+    num_paths : (3, m) + shape int32
+    frequency_hz : float
+    tx_power_dbm : float
+    coherent : bool
+        Whether the map's default quantities add paths coherently (``|sum a e^{-j2pi f tau}|^2``)
+        or by power (``sum |a|^2``).
+    elapsed_s : float
+        Wall-clock time of :func:`wavepaths.coverage.coverage` (context, inside test,
+        tiles) [s].
+    timings : dict
+        Wall-clock time of each stage [s].
+    stats : dict
+        Search counters added over all tiles (candidates, rejections, rays cast).
+    metadata : dict
+        JSON-ready settings: scene, trace options, field settings, coverage options.
+    """
+
+    grid: Grid
+    cell_centers: np.ndarray
+    inside: np.ndarray
+    tx_positions: np.ndarray
+    a_total: np.ndarray
+    a_sum: np.ndarray
+    power_sum: np.ndarray
+    num_paths: np.ndarray
+    frequency_hz: float
+    tx_power_dbm: float
+    coherent: bool = True
+    elapsed_s: float = 0.0
+    timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+
+    # ---- sizes -----------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.inside.shape
+
+    @property
+    def num_cells(self) -> int:
+        return int(self.inside.size)
+
+    @property
+    def num_tx(self) -> int:
+        return len(self.tx_positions)
+
+    @property
+    def cells_per_second(self) -> float:
+        """Cells traced (outside objects) per second of ``elapsed_s``."""
+        traced = self.num_cells - int(self.inside.sum())
+        return traced / self.elapsed_s if self.elapsed_s > 0 else float("nan")
+
+    # ---- linear quantities -----------------------------------------------------------
+    def _coherent(self, coherent: bool | None) -> bool:
+        return self.coherent if coherent is None else bool(coherent)
+
+    def path_gain_per_tx(self, coherent: bool | None = None) -> np.ndarray:
+        """(m,) + shape float64: linear path gain of each transmitter (NaN inside objects)."""
+        if self._coherent(coherent):
+            return np.abs(self.a_total) ** 2
+        return self.power_sum.sum(axis=0)
+
+    @property
+    def best_server(self) -> np.ndarray:
+        """shape int64: the transmitter with the highest path gain; -1 inside objects or
+        where no path arrives."""
+        g = self.path_gain_per_tx()
+        filled = np.where(np.isnan(g), -1.0, g)
+        best = np.argmax(filled, axis=0)
+        reached = np.take_along_axis(filled, best[None], axis=0)[0] > 0
+        return np.where(reached & ~self.inside, best, -1)
+
+    def _select(self, per_tx: np.ndarray, tx: int | None) -> np.ndarray:
+        """``per_tx`` (m,) + shape or (3, m) + shape -> that transmitter, or the best server."""
+        axis = per_tx.ndim - len(self.shape) - 1
+        if tx is not None:
+            if not -self.num_tx <= tx < self.num_tx:
+                raise WavepathsError(f"`tx` must be in 0..{self.num_tx - 1}, got {tx}")
+            return np.take(per_tx, tx, axis=axis)
+        best = np.maximum(self.best_server, 0)
+        idx = best.reshape((1,) * (axis + 1) + best.shape)
+        return np.squeeze(np.take_along_axis(per_tx, idx, axis=axis), axis=axis)
+
+    def path_gain(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
+        """shape float64: linear path gain of transmitter ``tx``, or of the best server."""
+        return self._select(self.path_gain_per_tx(coherent), tx)
+
+    def mechanism_gain(self, mechanism: Mechanism, tx: int | None = None) -> np.ndarray:
+        """shape float64: ``sum |a|^2`` over the paths of one mechanism (the incoherent split)."""
+        if mechanism not in MECHANISMS:
+            raise WavepathsError(f"`mechanism` must be one of {MECHANISMS}, got {mechanism!r}")
+        return self._select(self.power_sum, tx)[MECHANISMS.index(mechanism)]
+
+    # ---- decibels ----------------------------------------------------------------------
+    def path_gain_db(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
+        """shape float64: path gain [dB]; ``-inf`` where no path arrives, NaN inside objects."""
+        return _db(self.path_gain(tx, coherent))
+
+    def received_power_dbm(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
+        """shape float64: received power [dBm] for ``tx_power_dbm``."""
+        return self.tx_power_dbm + self.path_gain_db(tx, coherent)
+
+    def field_strength_dbuv_m(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
+        """shape float64: field strength [dBuV/m] (isotropic receiver, ``tx_power_dbm``)."""
+        return field_strength_dbuv_m(self.received_power_dbm(tx, coherent), self.frequency_hz)
+
+    def mechanism_gain_db(self, mechanism: Mechanism, tx: int | None = None) -> np.ndarray:
+        """shape float64: :meth:`mechanism_gain` [dB]."""
+        return _db(self.mechanism_gain(mechanism, tx))
+
+    def quantity(self, name: str, tx: int | None = None) -> np.ndarray:
+        """One of ``path_gain_db``, ``received_power_dbm``, ``field_strength_dbuv_m``, or
+        ``<mechanism>_gain_db`` (``los_gain_db``, ``reflection_gain_db``, ``diffraction_gain_db``)."""
+        if name in ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m"):
+            return getattr(self, name)(tx)
+        for mech in MECHANISMS:
+            if name == f"{mech}_gain_db":
+                return self.mechanism_gain_db(mech, tx)
+        names = ["path_gain_db", "received_power_dbm", "field_strength_dbuv_m"] + [f"{m}_gain_db" for m in MECHANISMS]
+        raise WavepathsError(f"`quantity` must be one of {names}, got {name!r}")
+
+    # ---- files -------------------------------------------------------------------------
+    def save(self, path: str) -> str:
+        """Write the map to ``path`` (``.npz``, compressed). Returns the path written.
+
+        Keys: ``path_gain_db``, ``received_power_dbm``, ``field_strength_dbuv_m``,
+        ``best_server`` (shape; best server), ``cell_centers`` (shape + (3,)) [m],
+        ``inside`` (shape), ``path_gain_db_per_tx`` ((m,) + shape),
+        ``mechanism_gain_db`` ((3, m) + shape, :data:`MECHANISMS` order), ``tx_positions``
+        (m, 3), the raw sums ``a_total``, ``a_sum``, ``power_sum``, ``num_paths``,
+        ``mesh_vertices`` and ``mesh_faces`` for a mesh grid, and ``metadata`` (a JSON
+        string).
+        """
+        if not str(path).endswith(".npz"):
+            path = f"{path}.npz"
+        meta = dict(self.metadata)
+        meta.update({
+            "format_version": FORMAT_VERSION,
+            "grid": self.grid.describe(),
+            "frequency_hz": self.frequency_hz,
+            "tx_power_dbm": self.tx_power_dbm,
+            "coherent": self.coherent,
+            "elapsed_s": self.elapsed_s,
+            "timings": self.timings,
+            "stats": {k: int(v) for k, v in self.stats.items()},
+            "mechanisms": list(MECHANISMS),
+            "units": {"path_gain_db": "dB", "received_power_dbm": "dBm", "field_strength_dbuv_m": "dBuV/m",
+                      "cell_centers": "m"},
+        })
+        arrays = {
+            "path_gain_db": self.path_gain_db(),
+            "received_power_dbm": self.received_power_dbm(),
+            "field_strength_dbuv_m": self.field_strength_dbuv_m(),
+            "best_server": self.best_server,
+            "cell_centers": self.cell_centers,
+            "inside": self.inside,
+            "path_gain_db_per_tx": _db(self.path_gain_per_tx()),
+            "mechanism_gain_db": _db(self.power_sum),
+            "tx_positions": self.tx_positions,
+            "a_total": self.a_total,
+            "a_sum": self.a_sum,
+            "power_sum": self.power_sum,
+            "num_paths": self.num_paths,
+            "metadata": np.array(json.dumps(meta)),
+        }
+        if isinstance(self.grid, MeshGrid):
+            arrays["mesh_vertices"] = self.grid.vertices
+            arrays["mesh_faces"] = self.grid.faces
+        np.savez_compressed(path, **arrays)
+        return str(path)
+
+    @classmethod
+    def load(cls, path: str) -> "CoverageMap":
+        """Read a map written by :meth:`save`."""
+        try:
+            data = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise WavepathsError(f"{path}: cannot read a coverage map ({exc})") from None
+        with data:
+            need = ("metadata", "cell_centers", "inside", "tx_positions", "a_total", "a_sum", "power_sum", "num_paths")
+            missing = [k for k in need if k not in data.files]
+            if missing:
+                raise WavepathsError(f"{path}: not a wavepaths coverage map (missing {missing})")
+            meta = json.loads(str(data["metadata"]))
+            g = meta["grid"]
+            if g["kind"] == "planar":
+                grid: Grid = PlanarGrid(g["center"], g["size"], g["cell_size"], orientation=g["orientation"])
+            else:
+                grid = MeshGrid(data["mesh_vertices"], data["mesh_faces"], g["offset"])
+            own = {"grid", "frequency_hz", "tx_power_dbm", "coherent", "elapsed_s", "timings", "stats",
+                   "format_version", "mechanisms", "units"}
+            return cls(
+                grid=grid,
+                cell_centers=data["cell_centers"],
+                inside=data["inside"],
+                tx_positions=data["tx_positions"],
+                a_total=data["a_total"],
+                a_sum=data["a_sum"],
+                power_sum=data["power_sum"],
+                num_paths=data["num_paths"],
+                frequency_hz=float(meta["frequency_hz"]),
+                tx_power_dbm=float(meta["tx_power_dbm"]),
+                coherent=bool(meta["coherent"]),
+                elapsed_s=float(meta["elapsed_s"]),
+                timings=dict(meta["timings"]),
+                stats=dict(meta["stats"]),
+                metadata={k: v for k, v in meta.items() if k not in own},
+            )
+
+    # ---- pictures ----------------------------------------------------------------------
+    def plot(self, quantity: str = "path_gain_db", tx: int | None = None, **kwargs):
+        """Draw the map with matplotlib (see :func:`wavepaths.coverage.plot.plot_coverage`)."""
+        from .plot import plot_coverage
+
+        return plot_coverage(self, quantity=quantity, tx=tx, **kwargs)
+
+
+def _db(x: np.ndarray) -> np.ndarray:
+    """10 log10 with -inf for zeros and NaN kept."""
+    x = np.asarray(x, dtype=float)
+    out = power_db(np.where(np.isnan(x), 0.0, x))
+    out[np.isnan(x)] = np.nan
+    return out

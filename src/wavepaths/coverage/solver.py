@@ -1,0 +1,339 @@
+"""``coverage()``: a deterministic coverage map on the exact path engine.
+
+How the work splits (the architecture's three costs):
+
+1. once per scene: the scene, its dihedra and ray caster (built by the caller's
+   :func:`~wavepaths.scene.load_scene`, rebuilt per process where it cannot pickle);
+2. once per transmitter set: :func:`~wavepaths.search.build_tx_context` (image trees,
+   diffraction sources) and the inside-object test of the cells;
+3. per tile of ``tile_size`` cells: :func:`solve_tile` runs
+   :func:`~wavepaths.search.tile.trace_tile` on the cell centres, the field chain on the
+   paths found, and sums the coefficients per cell with ``bincount``: the tile returns
+   fixed-size arrays (``~100 bytes`` per cell and transmitter), never its paths.
+
+Tiles are independent, so :mod:`wavepaths.coverage.parallel` runs them in this process,
+in a local process pool, or on a Dask cluster, with the same numbers: a cell's value is
+exactly what :func:`wavepaths.trace` and :func:`wavepaths.fields.compute_fields` give for
+a receiver at the cell centre.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..errors import WavepathsError
+from ..fields import FieldConfig, compute_fields
+from ..scene.model import Scene
+from ..search.context import TxContext, build_tx_context
+from ..search.options import TraceOptions
+from ..search.paths import InteractionType, Paths, assemble
+from ..search.tile import trace_tile
+from ..search.trace import check_positions
+from .grid import Grid, MeshGrid, PlanarGrid
+from .inside import inside_solid_objects, solid_objects
+from .result import MECHANISMS, CoverageMap
+
+# result bytes per cell and transmitter: a_total (16) + a_sum (3 x 16) + power_sum (3 x 8)
+# + num_paths (3 x 4), plus the derived dB maps written by save() (~3 x 8)
+RESULT_BYTES_PER_CELL_TX = 124
+RESULT_BYTES_PER_CELL = 24 + 1 + 8 * 4  # centres, inside mask, best-server maps
+
+
+@dataclass(frozen=True)
+class CoverageOptions:
+    """Settings of a coverage map that path search and fields do not have.
+
+    Attributes
+    ----------
+    tile_size : int
+        Cells traced together in one vectorised call (memory vs. per-call overhead; the
+        working set grows about linearly with it, see ``docs/coverage.md``).
+    coherent : bool
+        Add the paths of a cell coherently, ``|sum a e^{-j 2 pi f tau}|^2`` (default), or
+        by power, ``sum |a|^2`` (smoother maps). Both are kept in the map; this picks
+        which one its quantities report by default.
+    workers : int or None
+        Local processes. ``None``: one per core when there is more than one tile; ``1``:
+        in this process. Ignored when a Dask ``client`` is given.
+    mask_inside : bool
+        Mark cells inside solid objects NaN and do not trace them
+        (:mod:`wavepaths.coverage.inside`). Turn off for scenes whose closed objects are
+        rooms to be covered from inside.
+    max_memory_bytes : int
+        Refuse maps whose result arrays would exceed this [bytes] (the tiles bound the
+        working memory separately).
+    """
+
+    tile_size: int = 256
+    coherent: bool = True
+    workers: int | None = None
+    mask_inside: bool = True
+    max_memory_bytes: int = 4 << 30
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.tile_size, (int, np.integer)) or self.tile_size < 1:
+            raise WavepathsError(f"`tile_size` must be a positive integer, got {self.tile_size!r}")
+        if self.workers is not None and (not isinstance(self.workers, (int, np.integer)) or self.workers < 1):
+            raise WavepathsError(f"`workers` must be None or a positive integer, got {self.workers!r}")
+        if self.max_memory_bytes <= 0:
+            raise WavepathsError(f"`max_memory_bytes` must be positive, got {self.max_memory_bytes!r}")
+
+
+@dataclass
+class TileSums:
+    """Per-cell sums of one tile (m transmitters, k cells); see :class:`CoverageMap`.
+
+    Attributes
+    ----------
+    a_total : (m, k) complex128
+    a_sum : (3, m, k) complex128
+    power_sum : (3, m, k) float64
+    num_paths : (3, m, k) int32
+    stats : dict
+    """
+
+    a_total: np.ndarray
+    a_sum: np.ndarray
+    power_sum: np.ndarray
+    num_paths: np.ndarray
+    stats: dict
+
+
+def path_mechanism(paths: Paths) -> np.ndarray:
+    """(N,) int64: index into :data:`MECHANISMS` of each path (LOS 0, reflection 1, diffraction 2)."""
+    diffracted = (paths.interactions == InteractionType.DIFFRACTION).any(axis=1)
+    return np.where(paths.depth == 0, 0, np.where(diffracted, 2, 1))
+
+
+def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
+    """Trace one tile of cell centres ``rx`` (k, 3) [m] and sum their path coefficients.
+
+    ``rx`` must be finite and off the transmitters (checked by :func:`coverage`).
+    """
+    m, k = len(ctx.tx), len(rx)
+    batches, stats = trace_tile(scene, ctx, rx, 0)
+    paths = assemble(ctx.tx, rx, batches, dict(stats))
+    pair = paths.tx_index * k + paths.rx_index
+    key = path_mechanism(paths) * (m * k) + pair
+    n3 = 3 * m * k
+    if len(paths):
+        result = compute_fields(scene, paths, config)
+        ap = result.a_phased
+        power = np.abs(result.a) ** 2
+    else:
+        ap = np.zeros(0, complex)
+        power = np.zeros(0)
+    # bincount adds in path order, like FieldResult.path_gain's np.add.at
+    a_total = np.bincount(pair, ap.real, m * k) + 1j * np.bincount(pair, ap.imag, m * k)
+    a_sum = np.bincount(key, ap.real, n3) + 1j * np.bincount(key, ap.imag, n3)
+    return TileSums(
+        a_total=a_total.reshape(m, k),
+        a_sum=a_sum.reshape(3, m, k),
+        power_sum=np.bincount(key, power, n3).reshape(3, m, k),
+        num_paths=np.bincount(key, minlength=n3).astype(np.int32).reshape(3, m, k),
+        stats=dict(stats),
+    )
+
+
+def coverage(
+    scene: Scene,
+    tx,
+    grid: Grid,
+    options: TraceOptions | None = None,
+    *,
+    fields: FieldConfig | None = None,
+    settings: CoverageOptions | None = None,
+    client=None,
+    progress: bool | Callable[[int], None] | None = None,
+) -> CoverageMap:
+    """A coverage map: path gain, received power and field strength on every cell of ``grid``.
+
+    Parameters
+    ----------
+    scene : Scene
+    tx : (m, 3) array_like
+        Transmitter positions [m]; with several, the map also gives the best server.
+    grid : PlanarGrid or MeshGrid
+        Where to evaluate: cell centres are the receivers.
+    options : TraceOptions, optional
+        What to trace (default: line of sight, reflections to order 2, first-order
+        diffraction with one reflection).
+    fields : FieldConfig, optional
+        Frequency, diffraction model, antennas, transmit power.
+    settings : CoverageOptions, optional
+        Tile size, coherent or power sum, local workers, inside-object mask.
+    client : dask.distributed.Client, optional
+        Run the tiles on this cluster; the scene and the transmitter context are sent to
+        every worker once.
+    progress : bool or callable, optional
+        ``True``: a tqdm bar on standard error (shown only on a terminal). A callable is
+        called with the number of cells finished so far.
+
+    Returns
+    -------
+    CoverageMap
+
+    Raises
+    ------
+    WavepathsError
+        A transmitter that is NaN, inside a solid object or at a cell centre; a grid
+        whose result would not fit ``settings.max_memory_bytes``; options of the wrong
+        type.
+    """
+    from .parallel import run_tiles
+
+    t_start = time.perf_counter()
+    opts = options or TraceOptions()
+    cfg = fields or FieldConfig()
+    cov = settings or CoverageOptions()
+    _check_types(scene, grid, opts, cfg, cov)
+    tx = check_positions("tx", tx)
+    m = len(tx)
+    n = grid.num_cells
+    need = n * (RESULT_BYTES_PER_CELL + m * RESULT_BYTES_PER_CELL_TX)
+    if need > cov.max_memory_bytes:
+        raise WavepathsError(
+            f"the grid has {n:,} cells ({' x '.join(map(str, grid.shape))}) for {m} transmitter(s): its map needs "
+            f"about {need / 2**30:.1f} GiB, above the limit of {cov.max_memory_bytes / 2**30:.1f} GiB "
+            f"(`CoverageOptions.max_memory_bytes`); use larger cells or a smaller area, or split the area"
+        )
+    centres = grid.cell_centers()
+    flat = centres.reshape(-1, 3)
+    bad = ~np.isfinite(flat).all(axis=1)
+    if bad.any():
+        raise WavepathsError(f"the grid has NaN or infinite cell centres at cell(s) {np.nonzero(bad)[0][:10].tolist()}")
+
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    if cov.mask_inside:
+        solids = solid_objects(scene)
+        inside = inside_solid_objects(scene, flat, solids)
+        tx_in = inside_solid_objects(scene, tx, solids)
+        if tx_in.any():
+            i = int(np.nonzero(tx_in)[0][0])
+            raise WavepathsError(
+                f"transmitter {i} at {tx[i].tolist()} lies inside a solid object: move it, or set "
+                f"`CoverageOptions(mask_inside=False)` if the object is a room to cover from inside"
+            )
+    else:
+        inside = np.zeros(len(flat), bool)
+    timings["inside_s"] = time.perf_counter() - t
+    active = np.nonzero(~inside)[0]
+    _check_off_transmitters(scene, tx, flat, active, grid)
+
+    t = time.perf_counter()
+    ctx = build_tx_context(scene, tx, opts)
+    timings["context_s"] = time.perf_counter() - t
+
+    a_total = np.full((m, n), np.nan + 0j)
+    a_sum = np.full((3, m, n), np.nan + 0j)
+    power_sum = np.full((3, m, n), np.nan)
+    num_paths = np.zeros((3, m, n), np.int32)
+    stats: Counter = Counter(ctx.stats)
+    tiles = [active[s : s + cov.tile_size] for s in range(0, len(active), cov.tile_size)]
+    bar, report = _progress(progress, len(active))
+
+    def on_done(i: int, sums: TileSums) -> None:
+        cells = tiles[i]
+        a_total[:, cells] = sums.a_total
+        a_sum[:, :, cells] = sums.a_sum
+        power_sum[:, :, cells] = sums.power_sum
+        num_paths[:, :, cells] = sums.num_paths
+        stats.update(sums.stats)
+        report(len(cells))
+
+    t = time.perf_counter()
+    try:
+        workers = run_tiles(scene, ctx, cfg, [flat[c] for c in tiles], on_done, workers=cov.workers, client=client)
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["tiles_s"] = time.perf_counter() - t
+    elapsed = time.perf_counter() - t_start
+    shape = grid.shape
+    metadata = {
+        "scene": scene.source,
+        "trace_options": dataclasses.asdict(opts),
+        "field_config": dataclasses.asdict(cfg),
+        "coverage_options": dataclasses.asdict(cov),
+        "workers": workers,
+        "tiles": len(tiles),
+        "cells_traced": int(len(active)),
+    }
+    return CoverageMap(
+        grid=grid,
+        cell_centers=centres,
+        inside=inside.reshape(shape),
+        tx_positions=tx,
+        a_total=a_total.reshape((m,) + shape),
+        a_sum=a_sum.reshape((3, m) + shape),
+        power_sum=power_sum.reshape((3, m) + shape),
+        num_paths=num_paths.reshape((3, m) + shape),
+        frequency_hz=cfg.frequency_hz,
+        tx_power_dbm=cfg.tx_power_dbm,
+        coherent=cov.coherent,
+        elapsed_s=elapsed,
+        timings=timings,
+        stats=dict(stats),
+        metadata=metadata,
+    )
+
+
+def _check_types(scene, grid, opts, cfg, cov) -> None:
+    for name, value, kind in (("scene", scene, Scene), ("grid", grid, (PlanarGrid, MeshGrid)),
+                              ("options", opts, TraceOptions), ("fields", cfg, FieldConfig),
+                              ("settings", cov, CoverageOptions)):
+        if not isinstance(value, kind):
+            want = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
+            raise WavepathsError(f"`{name}` must be a {want}, got {type(value).__name__}")
+
+
+def _check_off_transmitters(scene: Scene, tx: np.ndarray, flat: np.ndarray, active: np.ndarray, grid: Grid) -> None:
+    """A cell centre on a transmitter has no defined field: say which, and how to avoid it."""
+    tol = scene.length_tolerance(scene.tolerances.weld)
+    pts = flat[active]
+    for i, t in enumerate(tx):
+        hit = np.nonzero(np.linalg.norm(pts - t, axis=1) <= tol)[0]
+        if len(hit):
+            cell = np.unravel_index(int(active[hit[0]]), grid.shape)
+            raise WavepathsError(
+                f"cell {tuple(int(c) for c in cell)} has its centre on transmitter {i} at {t.tolist()}: "
+                f"move the grid (e.g. its height) or the transmitter by a fraction of a cell"
+            )
+
+
+def _progress(progress, total: int):
+    """(tqdm bar or None, callable taking the cells just finished)."""
+    if callable(progress):
+        done = [0]
+
+        def report(k: int) -> None:
+            done[0] += k
+            progress(done[0])
+
+        return None, report
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, unit="cell", file=sys.stderr, disable=not sys.stderr.isatty(), dynamic_ncols=True)
+        return bar, bar.update
+    return None, lambda k: None
+
+
+def default_workers() -> int:
+    """Cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+__all__ = ["CoverageOptions", "TileSums", "coverage", "path_mechanism", "solve_tile", "MECHANISMS"]
