@@ -1,24 +1,28 @@
-"""Which points lie inside a solid object (a building), by ray parity.
+"""Which points lie inside a solid (a building), by ray parity.
 
 A coverage cell whose centre lies inside a building has no meaningful field: the map
-marks it NaN instead of tracing it. An object counts as *solid* when its triangles close
-it up, except perhaps for an opening at its base (city meshes often leave out the
-floor of each building): every edge is shared by exactly two of the object's triangles,
-or by one when the edge lies at the object's lowest ``z``. Flat objects (a ground plane)
-are never solid.
+marks it NaN instead of tracing it. Solids are found on the triangle mesh itself, across
+object boundaries (Sionna RT's city scenes split each building into a wall object and a
+roof object, neither closed alone): the scene's triangles are grouped into connected
+components through shared edges, and a component is *solid* when every edge of it is
+shared by an even number of its triangles, except edges at the component's lowest
+``z``, which may border one (city meshes often leave out the floor of each building).
+Such a surface bounds a region in the mod-2 sense, so ray parity is well defined even
+where blocks touch along an edge (four triangles) or share a wall. Flat components (a
+ground plane alone) are never solid. In a component that does not bound a region (a block
+with an awning hinged on its roof edge), each object that does by itself is a solid.
 
-A point is inside a solid when an upward ray from it crosses that object's triangles an
-odd number of times (the open base cannot be crossed by a ray going up). Rays are cast
-along three generic upward directions and the majority decides, so a ray that passes
-exactly through an edge or a vertex (float64 ties on regular grids) cannot flip the
-answer alone. The crossings are counted in float64 with numpy: a shear along the ray
-direction turns every ray vertical, triangles are binned on a 2-D hash grid of the
-sheared plane, and each (point, triangle) pair in the same bin gets a 2-D
-point-in-triangle test and a height comparison. No Embree, no float32.
+A point is inside a solid when an upward ray from it crosses that component's triangles
+an odd number of times (a ray going up cannot cross the open base); below the base of an
+open component nothing is inside. Rays are cast along three generic upward directions
+and the majority decides, so a ray that passes exactly through an edge or a vertex
+(float64 ties on regular grids) cannot flip the answer alone. The crossings are counted
+in float64 with numpy: a shear along the ray direction turns every ray vertical,
+triangles are binned on a 2-D hash grid of the sheared plane, and each (point,
+triangle) pair in the same bin gets a 2-D point-in-triangle test and a height
+comparison. No Embree, no float32.
 
 Points lying exactly on a surface of a solid are on its boundary: either answer may come.
-Overlapping solids of one object (intersecting meshes merged into one object) break the
-parity of that object; separate objects may overlap freely.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -41,12 +47,13 @@ PAIR_BUDGET = 1 << 21  # (point, triangle) pairs tested at once
 
 @dataclass(frozen=True)
 class SolidObjects:
-    """The solid objects of a scene (see module docstring).
+    """The solids of a scene: connected triangle components that bound a region.
 
     Attributes
     ----------
-    objects : (s,) int64
-        Object ids (indices into ``scene.object_names``).
+    objects : (s,) object array of tuple of int
+        For each solid, the object ids (indices into ``scene.object_names``) its
+        triangles belong to.
     closed : (s,) bool
         False for a solid whose base is open.
     base_z : (s,) float64 [m]
@@ -54,7 +61,7 @@ class SolidObjects:
     triangles : (t,) int64
         Scene triangles of the solids.
     triangle_solid : (t,) int64
-        Row in ``objects`` of each of those triangles.
+        Solid (row of the arrays above) of each of those triangles.
     """
 
     objects: np.ndarray
@@ -64,39 +71,70 @@ class SolidObjects:
     triangle_solid: np.ndarray
 
     def __len__(self) -> int:
-        return len(self.objects)
+        return len(self.closed)
+
+
+def _bounding_groups(scene: "Scene", label: np.ndarray, tol: float):
+    """For triangle groups ``label`` (f,) int64 numbered 0..g-1: which bound a region.
+
+    Returns ``good`` (g,) bool, ``closed`` (g,) bool and ``base_z`` (g,) float64: every edge
+    borders an even number of the group's triangles, except at the group's lowest ``z``;
+    the group is not flat.
+    """
+    g = int(label.max()) + 1
+    inc = scene.incidence
+    tri_z = scene.vertices[scene.triangles][:, :, 2]
+    zmin = np.full(g, np.inf)
+    zmax = np.full(g, -np.inf)
+    np.minimum.at(zmin, label, tri_z.min(axis=1))
+    np.maximum.at(zmax, label, tri_z.max(axis=1))
+    edge = np.repeat(np.arange(len(inc.edges)), inc.counts)
+    key, count = np.unique(edge * g + label[inc.incidence_tri], return_counts=True)
+    e, grp = key // g, key % g
+    odd = count % 2 == 1
+    at_base = scene.vertices[inc.edges[e]][:, :, 2].max(axis=1) <= zmin[grp] + tol
+    bad = np.zeros(g, bool)
+    bad[grp[odd & ~at_base]] = True
+    opening = np.zeros(g, bool)
+    opening[grp[odd & at_base]] = True
+    return ~bad & (zmax - zmin > tol), ~opening, zmin
 
 
 def solid_objects(scene: "Scene") -> SolidObjects:
-    """Find the objects of ``scene`` that are closed, or open only at their base."""
-    inc = scene.incidence
-    n_obj = max(len(scene.object_names), int(scene.triangle_object.max()) + 1)
-    tol = scene.length_tolerance(scene.tolerances.plane_distance)
-    tri_z = scene.vertices[scene.triangles][:, :, 2]
-    zmin = np.full(n_obj, np.inf)
-    zmax = np.full(n_obj, -np.inf)
-    np.minimum.at(zmin, scene.triangle_object, tri_z.min(axis=1))
-    np.maximum.at(zmax, scene.triangle_object, tri_z.max(axis=1))
+    """Find the solids of ``scene`` (see the module docstring).
 
-    edge = np.repeat(np.arange(len(inc.edges)), inc.counts)
-    key = edge * n_obj + scene.triangle_object[inc.incidence_tri]
-    uk, count = np.unique(key, return_counts=True)
-    e, o = uk // n_obj, uk % n_obj
-    edge_z = scene.vertices[inc.edges[e]][:, :, 2].max(axis=1)
-    at_base = edge_z <= zmin[o] + tol
-    bad = (count > 2) | ((count == 1) & ~at_base)
-    open_base = (count == 1) & at_base
-    is_bad = np.zeros(n_obj, bool)
-    is_bad[o[bad]] = True
-    has_opening = np.zeros(n_obj, bool)
-    has_opening[o[open_base]] = True
-    present = np.isfinite(zmin)
-    solid = present & ~is_bad & (zmax - zmin > tol)
-    objects = np.nonzero(solid)[0]
-    row = np.full(n_obj, -1)
-    row[objects] = np.arange(len(objects))
-    tris = np.nonzero(solid[scene.triangle_object])[0]
-    return SolidObjects(objects, ~has_opening[objects], zmin[objects], tris, row[scene.triangle_object[tris]])
+    Connected components that bound a region are solids; in a component that does not
+    (a block with an awning hinged on its roof edge), each object that bounds a region by
+    itself is one.
+    """
+    inc = scene.incidence
+    f = scene.num_triangles
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    edge = np.repeat(np.arange(len(inc.edges)), inc.counts)  # edge of each incidence entry
+    same = edge[1:] == edge[:-1]
+    a, b = inc.incidence_tri[:-1][same], inc.incidence_tri[1:][same]
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(f, f))
+    n_comp, comp = connected_components(graph, directed=False)
+    good_c, closed_c, base_c = _bounding_groups(scene, comp, tol)
+    # fallback inside components that do not bound a region: their objects one by one
+    _, part = np.unique(comp * (int(scene.triangle_object.max()) + 1) + scene.triangle_object, return_inverse=True)
+    part = part.reshape(-1)
+    good_p, closed_p, base_p = _bounding_groups(scene, part, tol)
+    use_comp = good_c[comp]
+    use_part = ~use_comp & good_p[part]
+    tris = np.nonzero(use_comp | use_part)[0]
+    # one numbering for both kinds: components first, then parts
+    key = np.where(use_comp[tris], comp[tris], n_comp + part[tris])
+    ids, owner = np.unique(key, return_inverse=True)
+    owner = owner.reshape(-1)
+    is_comp = ids < n_comp
+    closed = np.where(is_comp, closed_c[np.minimum(ids, n_comp - 1)], closed_p[np.maximum(ids - n_comp, 0)])
+    base_z = np.where(is_comp, base_c[np.minimum(ids, n_comp - 1)], base_p[np.maximum(ids - n_comp, 0)])
+    pairs = np.unique(np.stack([owner, scene.triangle_object[tris]], axis=1), axis=0)  # sorted by solid
+    groups = np.split(pairs[:, 1], np.cumsum(np.bincount(pairs[:, 0], minlength=len(ids)))[:-1])
+    objects = np.empty(len(ids), dtype=object)
+    objects[:] = [tuple(g.tolist()) for g in groups]
+    return SolidObjects(objects, closed, base_z, tris, owner)
 
 
 def inside_solid_objects(scene: "Scene", points: np.ndarray, solids: SolidObjects | None = None) -> np.ndarray:

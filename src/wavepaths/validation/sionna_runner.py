@@ -462,12 +462,12 @@ def run_sionna_radio_map(
     center: Sequence[float],
     size: Sequence[float],
     cell_size: Sequence[float],
-    orientation: Sequence[float] = (0.0, 0.0, 0.0),
-    *,
+    orientation: Sequence[float],
     frequency_hz: float,
     max_depth: int,
     diffraction: bool = True,
     samples_per_tx: int = 1_000_000,
+    *,
     los: bool = True,
     specular_reflection: bool = True,
     edge_diffraction: bool = False,
@@ -495,9 +495,9 @@ def run_sionna_radio_map(
         Size of the plane in metres (Sionna rounds it up to whole cells).
     cell_size : (cx, cy)
         Cell size in metres.
-    orientation : (alpha, beta, gamma), default (0, 0, 0)
+    orientation : (alpha, beta, gamma)
         Rotation of the plane in radians (z, y, x Euler angles as in Sionna);
-        zeros give a horizontal plane.
+        ``(0, 0, 0)`` gives a horizontal plane.
     frequency_hz, max_depth, diffraction, samples_per_tx
         As in Sionna; ``samples_per_tx`` rays are shot per transmitter.
     los, specular_reflection, edge_diffraction, diffraction_lit_region,

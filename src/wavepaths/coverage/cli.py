@@ -1,0 +1,132 @@
+"""``wavepaths coverage``: a coverage map from the command line (a thin layer over
+:func:`wavepaths.coverage.coverage`), written as a PNG and an ``.npz``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+import numpy as np
+
+from ..errors import DependencyError, WavepathsError
+
+QUANTITIES = ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m", "los_gain_db", "reflection_gain_db",
+              "diffraction_gain_db")
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """Register the ``coverage`` subcommand on the ``wavepaths`` parser's subparsers."""
+    from ..cli import _add_field_flags, _add_trace_flags
+
+    p = sub.add_parser(
+        "coverage",
+        help="coverage map (path gain, received power, field strength) over a grid of receivers",
+        description="Trace every cell of a horizontal grid (or the faces of a measurement mesh) and write "
+                    "DIR/coverage.png and DIR/coverage.npz.",
+    )
+    p.add_argument("scene", help="built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)")
+    p.add_argument("--tx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"),
+                   help="transmitter position [m]; repeat for several (the map shows the best server)")
+    p.add_argument("--height", type=float, help="height z of the grid [m] (planar grid)")
+    p.add_argument("--cell", type=float, help="cell size [m] (planar grid)")
+    p.add_argument("--size", nargs=2, type=float, metavar=("SX", "SY"),
+                   help="grid extent in x and y [m] (default: the scene's footprint)")
+    p.add_argument("--center", nargs=2, type=float, metavar=("X", "Y"),
+                   help="grid centre [m] (default: the centre of the scene's footprint)")
+    p.add_argument("--mesh", metavar="FILE", help="measurement mesh: its faces are the cells (instead of a grid)")
+    p.add_argument("--out", default=".", metavar="DIR", help="output folder (default: the current one)")
+    par = p.add_mutually_exclusive_group()
+    par.add_argument("--workers", type=int, help="local processes (default: one per core)")
+    par.add_argument("--dask", metavar="ADDRESS", help="run the tiles on the Dask scheduler at ADDRESS")
+    p.add_argument("--tile-size", type=int, default=256, help="cells traced together (default 256)")
+    p.add_argument("--incoherent", action="store_true", help="add path powers instead of complex amplitudes")
+    p.add_argument("--keep-inside", action="store_true",
+                   help="trace cells inside solid objects too (rooms covered from inside)")
+    p.add_argument("--quantity", choices=QUANTITIES, default="path_gain_db", help="what the PNG shows")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    _add_trace_flags(p)
+    _add_field_flags(p)
+    p.set_defaults(func=run)
+    return p
+
+
+def _grid(args, scene):
+    from .grid import MeshGrid, PlanarGrid
+
+    if args.mesh:
+        if args.height is not None or args.cell is not None or args.size or args.center:
+            raise WavepathsError("--mesh replaces the planar grid: leave out --height, --cell, --size and --center")
+        if not os.path.exists(args.mesh):
+            raise WavepathsError(f"{args.mesh}: no such measurement mesh")
+        return MeshGrid.from_file(args.mesh)
+    missing = [f for f, v in (("--height", args.height), ("--cell", args.cell)) if v is None]
+    if missing:
+        raise WavepathsError(f"a planar grid needs {' and '.join(missing)} (or give --mesh FILE)")
+    lo, hi = scene.bounds
+    center = np.array(args.center if args.center else 0.5 * (lo[:2] + hi[:2]), dtype=float)
+    size = np.array(args.size if args.size else hi[:2] - lo[:2], dtype=float)
+    return PlanarGrid(center=center, size=size, cell_size=args.cell, height=args.height)
+
+
+def _client(address: str):
+    try:
+        from distributed import Client
+    except ImportError:
+        raise DependencyError("--dask needs `distributed`: pip install 'wavepaths[dask]'") from None
+    try:
+        return Client(address, timeout=30)
+    except (OSError, TimeoutError) as exc:
+        raise WavepathsError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+
+
+def run(args) -> int:
+    from ..cli import _field_config, _trace_options
+    from ..scene import load_scene
+    from .plot import save_png
+    from .solver import CoverageOptions, coverage
+
+    scene = load_scene(args.scene)
+    grid = _grid(args, scene)
+    settings = CoverageOptions(tile_size=args.tile_size, coherent=not args.incoherent, workers=args.workers,
+                               mask_inside=not args.keep_inside)
+    tx = np.array(args.tx, dtype=float).reshape(-1, 3)
+    client = _client(args.dask) if args.dask else None
+    try:
+        cmap = coverage(scene, tx, grid, _trace_options(args), fields=_field_config(args), settings=settings,
+                        client=client, progress=not args.quiet)
+    finally:
+        if client is not None:
+            client.close()
+    os.makedirs(args.out, exist_ok=True)
+    npz = cmap.save(os.path.join(args.out, "coverage.npz"))
+    png = save_png(cmap, os.path.join(args.out, "coverage.png"), args.quantity, scene=scene,
+                   title=f"{os.path.basename(str(scene.source))}: {args.quantity}")
+    values = cmap.quantity(args.quantity)
+    finite = values[np.isfinite(values)]
+    summary = {
+        "scene": scene.source,
+        "shape": list(cmap.shape),
+        "cells": cmap.num_cells,
+        "cells_inside_objects": int(cmap.inside.sum()),
+        "cells_without_paths": int(np.isneginf(values).sum()),
+        "elapsed_s": cmap.elapsed_s,
+        "cells_per_second": cmap.cells_per_second,
+        "ran_on": cmap.metadata["workers"],
+        "quantity": args.quantity,
+        "min": float(finite.min()) if finite.size else None,
+        "max": float(finite.max()) if finite.size else None,
+        "png": png,
+        "npz": npz,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    print(f"coverage of {scene.source}: {cmap.num_cells} cells ({' x '.join(map(str, cmap.shape))}), "
+          f"{summary['cells_inside_objects']} inside objects, {summary['cells_without_paths']} without paths")
+    print(f"{cmap.elapsed_s:.2f} s ({cmap.cells_per_second:.0f} cells/s, {summary['ran_on']})")
+    if finite.size:
+        print(f"{args.quantity}: {summary['min']:.1f} .. {summary['max']:.1f}")
+    print(f"wrote {png} and {npz}")
+    return 0

@@ -1,0 +1,42 @@
+"""Known disagreements between wavepaths and Sionna RT 2.2, each with its reason.
+
+``tests/validation/test_known_disagreements.py`` runs each one as a strict expected
+failure: the day Sionna RT and wavepaths agree on one of them, that test fails loudly and
+the entry must be removed.
+"""
+
+KNOWN_DISAGREEMENTS = [
+    {
+        "id": "hard-polarisation-coefficient",
+        "what": "Diffracted |a| for E perpendicular to the edge (hard) differs from Kouyoumjian-Pathak by up to "
+                "tens of dB near the faces",
+        "reason": "Sionna RT 2.2 combines the UTD terms as R0 (d1 - d4) + Rn (d2 - d3) in reflected bases; for a "
+                  "perfect conductor its hard entry equals the soft coefficient (docs/sionna-diffraction.md). "
+                  "wavepaths' textbook UTD reproduces the exact half-plane solution; compat='sionna' reproduces Sionna.",
+        "who_matches_exact": "wavepaths (UTD)",
+    },
+    {
+        "id": "reflection-boundary-jump",
+        "what": "Sionna's total field jumps by about twice the incident amplitude across every reflection boundary",
+        "reason": "The 0-face reflection-boundary term d4 enters with -R0 instead of +R0, so the diffracted field's "
+                  "half-jump adds to the reflected field's jump instead of cancelling it "
+                  "(docs/sionna-diffraction.md §4).",
+        "who_matches_exact": "wavepaths (UTD)",
+    },
+    {
+        "id": "diffraction-between-objects",
+        "what": "Edges shared by two objects (a box standing on a ground plane, blocks touching) diffract in "
+                "wavepaths, not in Sionna",
+        "reason": "Sionna RT 2.2 finds wedges from opposite half-edges inside one mesh; wavepaths builds one "
+                  "dihedron per edge from every face of every object on it (seed §3.2).",
+        "who_matches_exact": "topology rule (no exact solution)",
+    },
+    {
+        "id": "sampling-misses",
+        "what": "Some valid paths (higher-order reflections, diffraction with reflections) are absent from Sionna's "
+                "output",
+        "reason": "Sionna samples candidate paths by shooting rays and caps them per source "
+                  "(max_num_paths_per_src); wavepaths enumerates exhaustively (tests/search/test_completeness.py).",
+        "who_matches_exact": "wavepaths (complete)",
+    },
+]

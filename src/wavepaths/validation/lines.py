@@ -1,0 +1,152 @@
+"""Receiver lines across shadow and reflection boundaries, against exact solutions.
+
+A transmitter far away (``S_PRIME`` metres) approximates a plane wave at a half-plane or
+a 90-degree wedge whose edge lies on the x axis; receivers sit on a circle of radius
+``rho`` around the edge. The normalised total field ``u`` (incident field at the edge = 1)
+of each engine is compared with Sommerfeld's half-plane solution and the wedge
+eigenfunction series.
+
+Both engines' antennas are Sionna's isotropic "V" / "H"; the physical soft and hard
+fields are recovered from the path coefficients with the geometric signs of the
+antenna bases (all rays travel in the y-z plane, perpendicular to the edge):
+
+* soft (E along the edge): ``u = sum a_HH (x.phi_hat(k_dep)) (x.phi_hat(-k_arr)) e^{-jkl}``;
+* hard (H along the edge): ``u = -sum a_VV (x.phi_hat(k_dep)) (x.phi_hat(-k_arr)) e^{-jkl}``;
+
+both divided by ``lambda / (4 pi s') e^{-jks'}``, the incident field at the edge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..em.antennas import Antenna
+from ..em.polarization import spherical_unit_vectors
+from ..exact.halfplane import halfplane_plane_wave
+from ..exact.wedge import wedge_plane_wave
+from ..fields import FieldConfig, compute_fields
+from ..scene import load_scene, write_mitsuba_xml
+from ..search import TraceOptions, trace
+
+S_PRIME = 1000.0
+SPEED_OF_LIGHT = 299_792_458.0
+
+
+@dataclass
+class BoundaryLine:
+    """|u| in dB along the circle, per engine and polarisation."""
+
+    name: str
+    phi_deg: np.ndarray
+    phi_prime_deg: float
+    k_rho: float
+    curves: dict  # (label, polarization) -> (k,) complex u
+    boundaries_deg: dict
+
+
+def _u(geometry_dirs, vertices_list, a, lengths, rx_index, n_rx, k, polarization, s_prime):
+    """Normalised soft/hard field from single-port coefficients (see module docstring)."""
+    x = np.array([1.0, 0.0, 0.0])
+    out = np.zeros(n_rx, complex)
+    dep, arr = geometry_dirs
+    s_tx = spherical_unit_vectors(dep).phi_hat @ x
+    s_rx = spherical_unit_vectors(-arr).phi_hat @ x
+    sign = 1.0 if polarization == "H" else -1.0
+    np.add.at(out, rx_index, sign * a * s_tx * s_rx * np.exp(-1j * k * lengths))
+    lam = 2 * np.pi / k
+    return out / (lam / (4 * np.pi * s_prime) * np.exp(-1j * k * s_prime))
+
+
+def _geometry(scene_name: str):
+    if scene_name == "half_plane":
+        # face direction -z from the edge; angles from -z toward +y
+        to_xyz = lambda phi: np.stack([np.zeros_like(phi), np.sin(phi), -np.cos(phi)], axis=-1)
+        return to_xyz, 2.0, 60.0
+    # wavepaths' wedge: 0-face along -z, n-face along -y, exterior from -z through +y, +z to -y
+    to_xyz = lambda phi: np.stack([np.zeros_like(phi), np.sin(phi), -np.cos(phi)], axis=-1)
+    return to_xyz, 1.5, 100.0
+
+
+def _keep_edge(vertices, depth, interactions, edge_is_diff):
+    """Paths that are LOS, reflections, or diffracted on the x-axis edge."""
+    keep = np.ones(len(depth), dtype=bool)
+    for i in range(len(depth)):
+        for j in range(depth[i]):
+            if interactions[i, j] == 2:
+                v = vertices[i, j + 1]
+                keep[i] &= edge_is_diff(v)
+    return keep
+
+
+def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rho: float = 1.5,
+                  with_sionna: bool = True) -> BoundaryLine:
+    """Compute the normalised total field along the circle for every engine available."""
+    import os
+
+    scene = load_scene(scene_name)
+    xml = os.path.join(out_dir, "scenes", scene_name, f"{scene_name}.xml")
+    os.makedirs(os.path.dirname(xml), exist_ok=True)
+    write_mitsuba_xml(scene, xml)
+    to_xyz, n, phi_p_deg = _geometry(scene_name)
+    k = 2 * np.pi * frequency_hz / SPEED_OF_LIGHT
+    phi_deg = np.arange(1.0, n * 180 - 0.5, 2.0)  # odd degrees: never exactly on a boundary
+    phi_deg = phi_deg[np.abs(phi_deg - phi_p_deg) > 1]
+    tx = S_PRIME * to_xyz(np.deg2rad(np.array([phi_p_deg])))
+    rx = rho * to_xyz(np.deg2rad(phi_deg))
+    on_edge = lambda v: abs(v[1]) < 1e-3 and abs(v[2]) < 1e-3
+    curves = {}
+    p = trace(scene, tx, rx, TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=0))
+    p = p.select(_keep_edge(p.vertices, p.depth, p.interactions, on_edge))
+    for pol in ("V", "H"):
+        ant = Antenna("iso", pol)
+        for label, cfg in (("wavepaths UTD", FieldConfig(frequency_hz, "utd", tx_antenna=ant, rx_antenna=ant)),
+                           ("wavepaths GTD", FieldConfig(frequency_hz, "gtd", tx_antenna=ant, rx_antenna=ant)),
+                           ("wavepaths compat=sionna", FieldConfig(frequency_hz, "utd", "sionna", tx_antenna=ant, rx_antenna=ant))):
+            r = compute_fields(scene, p, cfg)
+            curves[(label, pol)] = _u((p.departure_directions, p.arrival_directions), None, r.a, p.lengths,
+                                      p.rx_index, len(rx), k, pol, S_PRIME)
+        if with_sionna:
+            from .sionna_runner import run_sionna_paths
+
+            sn = run_sionna_paths(xml, tx, rx, frequency_hz=frequency_hz, max_depth=1, diffraction=True,
+                                  edge_diffraction=True, tx_antenna=("iso", pol), rx_antenna=("iso", pol))
+            depth = sn.num_interactions
+            keep = _keep_edge(sn.vertices, depth, sn.interactions, on_edge)
+            v = sn.vertices[keep]
+            d = depth[keep]
+            rows = np.arange(len(v))
+            dep = v[:, 1] - v[:, 0]
+            arr = v[rows, d + 1] - v[rows, d]
+            dep /= np.linalg.norm(dep, axis=1, keepdims=True)
+            arr /= np.linalg.norm(arr, axis=1, keepdims=True)
+            curves[("Sionna RT", pol)] = _u((dep, arr), None, sn.a[keep], sn.tau[keep] * SPEED_OF_LIGHT,
+                                            sn.rx_index[keep], len(rx), k, pol, S_PRIME)
+        soft_hard = "soft" if pol == "H" else "hard"
+        phi = np.deg2rad(phi_deg)
+        if n == 2.0:
+            curves[("exact", pol)] = halfplane_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), soft_hard)
+        else:
+            curves[("exact", pol)] = wedge_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), n, soft_hard)
+    bounds = {"shadow boundary": phi_p_deg + 180.0 if phi_p_deg + 180 < n * 180 else phi_p_deg - 180.0,
+              "0-face reflection boundary": 180.0 - phi_p_deg}
+    if (2 * n - 1) * 180 - phi_p_deg < n * 180:
+        bounds["n-face reflection boundary"] = (2 * n - 1) * 180 - phi_p_deg
+    return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds)
+
+
+def line_errors(line: BoundaryLine) -> dict:
+    """Largest and median |u| difference in dB from the exact solution, per engine and polarisation."""
+    out = {}
+    for (label, pol), u in line.curves.items():
+        if label == "exact":
+            continue
+        ref = line.curves[("exact", pol)]
+        d = 20 * np.log10(np.maximum(np.abs(u), 1e-12) / np.maximum(np.abs(ref), 1e-12))
+        lit = np.abs(ref) > 0.05  # skip the deep nulls of the exact field
+        out[f"{label} ({'soft' if pol == 'H' else 'hard'})"] = {
+            "max_db": float(np.max(np.abs(d[lit]))), "median_db": float(np.median(np.abs(d[lit]))),
+            "max_complex_error": float(np.max(np.abs(u - ref))),
+        }
+    return out

@@ -1,0 +1,355 @@
+"""``wavepaths validate``: the validation report against Sionna RT and exact solutions.
+
+For each case (:mod:`wavepaths.validation.cases`) both engines load the same Mitsuba XML
+file and trace the same transmitters, receivers, antennas and path types. wavepaths runs
+twice on the same geometry: with the textbook diffraction model and with
+``compat="sionna"``; matched paths are compared like for like (compat), and the textbook
+model's diffraction differences are reported beside them. Receiver lines across the
+shadow and reflection boundaries show who agrees with the exact solutions.
+
+Tolerances held (Sionna computes in float32, wavepaths in float64):
+
+* delays: 1e-6 relative;
+* |a| of line-of-sight and reflected paths: 0.1 dB;
+* |a| of diffracted paths, compat mode: 0.5 dB;
+* no path may be found by Sionna and not by wavepaths.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from ..fields import FieldConfig, compute_fields
+from ..scene import load_scene, write_mitsuba_xml
+from ..search import TraceOptions, trace
+from .cases import Case, default_cases
+from .compare import compare_paths, total_gain_db
+from .known import KNOWN_DISAGREEMENTS
+
+TOLERANCES = {"delay_rel": 1e-6, "gain_db_los_reflection": 0.1, "gain_db_diffraction_compat": 0.5}
+
+
+def _scene_file(case: Case, out_dir: str) -> str:
+    if case.scene.startswith("sionna:"):
+        from .sionna_runner import builtin_scene_path
+
+        return builtin_scene_path(case.scene.split(":", 1)[1])
+    path = os.path.join(out_dir, "scenes", case.scene, f"{case.scene}.xml")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    write_mitsuba_xml(load_scene(case.scene), path)
+    return path
+
+
+def _explainer(scene, paths, sn, case: Case):
+    dih = scene.dihedra
+
+    def explain(side: str, i: int) -> str:
+        if side == "sionna":
+            return "found by Sionna only: not found by wavepaths (a failure)"
+        kinds = paths.interactions[i, : paths.depth[i]]
+        if (kinds == 2).any():
+            d = int(paths.primitive[i][kinds.tolist().index(2)])
+            faces = dih.face_triangle[dih.faces(d)]
+            objects = set(scene.triangle_object[faces].tolist())
+            if dih.face_count[d] == 1 and not case.edge_diffraction:
+                return "free edge: Sionna diffracts on free edges only with edge_diffraction=True"
+            if len(objects) > 1:
+                return "edge between different objects: Sionna 2.2 diffracts only on wedges inside one mesh"
+            if dih.face_count[d] >= 3:
+                return "edge with three or more faces: Sionna has no such dihedron"
+        return "Sionna's ray sampling (or its path cap) missed it"
+
+    return explain
+
+
+def run_case(case: Case, out_dir: str) -> dict:
+    """Run one case on both engines; return its JSON-ready result."""
+    from .sionna_runner import run_sionna_paths
+
+    xml = _scene_file(case, out_dir)
+    scene = load_scene(xml)
+    opts = TraceOptions(max_reflections=case.max_depth, diffraction=True,
+                        diffraction_reflections=max(case.max_depth - 1, 0))
+    t0 = time.perf_counter()
+    paths = trace(scene, case.tx, case.rx, opts)
+    wp_time = time.perf_counter() - t0
+    result = {"name": case.name, "scene": case.scene, "scene_file": xml, "note": case.note,
+              "tx": case.tx.tolist(), "num_rx": len(case.rx), "max_depth": case.max_depth,
+              "edge_diffraction": case.edge_diffraction, "frequency_hz": case.frequency_hz,
+              "wavepaths_paths": len(paths), "wavepaths_time_s": wp_time, "polarizations": {}}
+    from ..em.antennas import Antenna
+
+    for pol in case.polarizations:
+        ant = Antenna("iso", pol)
+        t0 = time.perf_counter()
+        compat = compute_fields(scene, paths, FieldConfig(case.frequency_hz, "utd", "sionna", tx_antenna=ant, rx_antenna=ant))
+        fields_time = time.perf_counter() - t0
+        textbook = compute_fields(scene, paths, FieldConfig(case.frequency_hz, "utd", tx_antenna=ant, rx_antenna=ant))
+        sn = run_sionna_paths(xml, case.tx, case.rx, frequency_hz=case.frequency_hz, max_depth=case.max_depth,
+                              diffraction=True, edge_diffraction=case.edge_diffraction,
+                              samples_per_src=case.samples_per_src,
+                              tx_antenna=("iso", pol), rx_antenna=("iso", pol))
+        explain = _explainer(scene, paths, sn, case)
+        comp = compare_paths(paths, compat.a, sn, explain=explain)
+        comp_tb = compare_paths(paths, textbook.a, sn, explain=explain)
+        m, n = len(case.tx), len(case.rx)
+        matched_w = np.array([x.wp_index for x in comp.matches], dtype=int)
+        g_sn = total_gain_db(sn.tx_index, sn.rx_index, sn.a, sn.tau, case.frequency_hz, m, n)
+        g_wp_matched = total_gain_db(paths.tx_index[matched_w], paths.rx_index[matched_w], compat.a[matched_w],
+                                     paths.delays[matched_w], case.frequency_hz, m, n)
+        g_wp_all = textbook.path_gain_db()
+        summary = comp.summary()
+        violations = []
+        for mm in comp.matches:
+            if abs(mm.delay_rel_error) > TOLERANCES["delay_rel"]:
+                violations.append(f"delay {mm.kinds} rx {mm.rx}: {mm.delay_rel_error:.2e}")
+            tol = TOLERANCES["gain_db_diffraction_compat"] if "D" in mm.kinds else TOLERANCES["gain_db_los_reflection"]
+            if np.isfinite(mm.gain_diff_db) and abs(mm.gain_diff_db) > tol:
+                violations.append(f"|a| {mm.kinds} rx {mm.rx}: {mm.gain_diff_db:+.3f} dB")
+        if summary["only_sionna"]:
+            violations.append(f"{summary['only_sionna']} path(s) found by Sionna only")
+        textbook_d = comp_tb.summary()["by_kind"]
+        result["polarizations"][pol] = {
+            "comparison_compat": summary,
+            "textbook_diffraction_gain_diff_db": {k: v["gain_diff_db"] for k, v in textbook_d.items() if "D" in k},
+            "only_wavepaths": comp.only_wavepaths[:200],
+            "only_sionna": comp.only_sionna[:200],
+            "total_gain_db": {"sionna": g_sn.tolist(), "wavepaths_matched_compat": g_wp_matched.tolist(),
+                              "wavepaths_all_textbook": g_wp_all.tolist()},
+            "total_gain_diff_db_matched": _finite_max(np.abs(np.where(np.isfinite(g_sn) & np.isfinite(g_wp_matched),
+                                                                     g_wp_matched - g_sn, np.nan))),
+            "sionna_paths": int(len(sn.tx_index)),
+            "sionna_time_s": sn.elapsed_s,
+            "sionna_warmup_s": sn.warmup_s,
+            "wavepaths_fields_time_s": fields_time,
+            "violations": violations,
+            "passed": not violations,
+        }
+    result["passed"] = all(v["passed"] for v in result["polarizations"].values())
+    return result
+
+
+def _finite_max(x: np.ndarray):
+    x = np.asarray(x)
+    x = x[np.isfinite(x)]
+    return float(x.max()) if len(x) else None
+
+
+def _versions() -> dict:
+    import numpy
+    import scipy
+
+    from .. import __version__
+
+    out = {"wavepaths": __version__, "python": sys.version.split()[0], "numpy": numpy.__version__,
+           "scipy": scipy.__version__, "platform": platform.platform(), "machine": platform.machine(),
+           "cpus": os.cpu_count()}
+    try:
+        from .sionna_env import sionna_version
+
+        out["sionna-rt"] = sionna_version()
+        import drjit
+        import mitsuba
+
+        out["mitsuba"] = mitsuba.__version__
+        out["drjit"] = drjit.__version__
+    except Exception:  # pragma: no cover - reported as missing
+        pass
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    out["cpu"] = line.split(":", 1)[1].strip()
+                    break
+    except OSError:  # pragma: no cover
+        pass
+    return out
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def _line_figure(line) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.2), sharey=True)
+    styles = {"exact": dict(color="k", lw=2.4), "wavepaths UTD": dict(color="tab:blue", lw=1.4),
+              "wavepaths GTD": dict(color="tab:gray", lw=0.9, ls=":"), "Sionna RT": dict(color="tab:red", lw=1.4, ls="--"),
+              "wavepaths compat=sionna": dict(color="tab:orange", lw=0.9, ls="-.")}
+    for ax, pol in zip(axes, ("H", "V")):
+        for label, style in styles.items():
+            u = line.curves.get((label, pol))
+            if u is None:
+                continue
+            ax.plot(line.phi_deg, 20 * np.log10(np.maximum(np.abs(u), 1e-6)), label=label, **style)
+        for name, b in line.boundaries_deg.items():
+            ax.axvline(b, color="0.6", lw=0.8)
+            ax.text(b, 7.5, name.replace(" boundary", "\nboundary"), fontsize=7, ha="center", va="top")
+        ax.set_title(f"{line.name}: {'soft (E along the edge)' if pol == 'H' else 'hard (H along the edge)'}, "
+                     f"k rho = {line.k_rho:.0f}")
+        ax.set_xlabel("observer angle phi from the 0-face [deg]")
+        ax.set_ylim(-30, 8)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("|u| / incident at the edge [dB]")
+    axes[0].legend(fontsize=8, loc="lower left")
+    return _png(fig)
+
+
+def _gain_figure(case_result: dict) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pols = list(case_result["polarizations"])
+    fig, axes = plt.subplots(1, len(pols), figsize=(6.5 * len(pols), 3.6), squeeze=False)
+    for ax, pol in zip(axes[0], pols):
+        g = case_result["polarizations"][pol]["total_gain_db"]
+        x = np.arange(case_result["num_rx"])
+        ax.plot(x, np.array(g["sionna"])[0], "o--", color="tab:red", label="Sionna RT", ms=4)
+        ax.plot(x, np.array(g["wavepaths_matched_compat"])[0], ".-", color="tab:orange", label="wavepaths, matched paths, compat")
+        ax.plot(x, np.array(g["wavepaths_all_textbook"])[0], "-", color="tab:blue", label="wavepaths, all paths, UTD")
+        ax.set_xlabel("receiver")
+        ax.set_ylabel("total path gain [dB]")
+        ax.set_title(f"{case_result['name']} ({pol})")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    return _png(fig)
+
+
+def _fmt(x, spec=".3g"):
+    return "-" if x is None else format(x, spec)
+
+
+def write_html(summary: dict, figures: dict, path: str) -> None:
+    """The HTML report: versions, tolerances, per-case tables and plots, known disagreements."""
+    e = html.escape
+    rows = []
+    for c in summary["cases"]:
+        for pol, r in c["polarizations"].items():
+            s = r["comparison_compat"]
+            rows.append(
+                f"<tr class={'ok' if r['passed'] else 'bad'}><td>{e(c['name'])}</td><td>{pol}</td><td>{s['matched']}</td>"
+                f"<td>{s['only_wavepaths']}</td><td>{s['only_sionna']}</td>"
+                f"<td>{_fmt(s['delay_rel_error']['max'])}</td><td>{_fmt(s['gain_diff_db']['median'])}</td>"
+                f"<td>{_fmt(s['gain_diff_db']['max'])}</td><td>{_fmt(r['total_gain_diff_db_matched'])}</td>"
+                f"<td>{_fmt(c['wavepaths_time_s'])}</td><td>{_fmt(r['sionna_time_s'])}</td>"
+                f"<td>{'pass' if r['passed'] else 'FAIL: ' + e('; '.join(r['violations'][:3]))}</td></tr>")
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>wavepaths validation</title><style>",
+        "body{font-family:system-ui,sans-serif;max-width:1250px;margin:2em auto;color:#222}"
+        "table{border-collapse:collapse;font-size:13px;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 7px;text-align:right}"
+        "th{background:#f0f0f0}td:first-child{text-align:left}tr.bad{background:#fdd}tr.ok td:last-child{color:#070}"
+        "code{background:#f4f4f4;padding:1px 3px}img{max-width:100%}.small{font-size:12px;color:#555}",
+        "</style></head><body>",
+        f"<h1>wavepaths validation against Sionna RT and exact solutions</h1>",
+        f"<p>Generated {e(summary['generated'])} by <code>wavepaths validate{' --quick' if summary['quick'] else ''}</code>. "
+        f"Overall: <b>{'PASS' if summary['passed'] else 'FAIL'}</b>.</p>",
+        "<h2>Versions and machine</h2><table>" + "".join(
+            f"<tr><th>{e(k)}</th><td>{e(str(v))}</td></tr>" for k, v in summary["versions"].items()) + "</table>",
+        "<h2>Tolerances</h2><p>Sionna RT computes in float32, wavepaths in float64. Matched paths must agree within "
+        f"{TOLERANCES['delay_rel']:g} relative in delay, {TOLERANCES['gain_db_los_reflection']} dB in |a| for line of sight "
+        f"and reflections, {TOLERANCES['gain_db_diffraction_compat']} dB for diffraction when wavepaths reproduces Sionna's "
+        "diffraction combination (<code>compat='sionna'</code>); every path Sionna finds must be found by wavepaths. "
+        "Paths are matched by interaction sequence and vertex positions (within 2 cm), not by order.</p>",
+        "<h2>Path-by-path comparison (compat mode)</h2><table><tr><th>case</th><th>pol</th><th>matched</th>"
+        "<th>only wavepaths</th><th>only Sionna</th><th>max delay rel. diff</th><th>median |a| diff [dB]</th>"
+        "<th>max |a| diff [dB]</th><th>max total gain diff, matched [dB]</th><th>wavepaths trace [s]</th>"
+        "<th>Sionna [s]</th><th>verdict</th></tr>" + "".join(rows) + "</table>",
+    ]
+    parts.append("<h2>Across shadow and reflection boundaries: who matches the exact solution</h2>"
+                 "<p>A transmitter 1 km away lights the edge (a plane wave); receivers on a circle around it. "
+                 "|u| is the total field (line of sight, reflection, diffraction by this edge) relative to the "
+                 "incident field at the edge. Black: the exact solution (Sommerfeld's half-plane; the wedge "
+                 "eigenfunction series).</p>")
+    for name, line in summary.get("lines", {}).items():
+        parts.append(f"<h3>{e(name)}</h3><img src='data:image/png;base64,{figures['line_' + name]}'>")
+        parts.append("<table><tr><th>engine (polarisation)</th><th>max |u| error [dB]</th><th>median [dB]</th>"
+                     "<th>max complex error</th></tr>" + "".join(
+                         f"<tr><td>{e(k)}</td><td>{_fmt(v['max_db'])}</td><td>{_fmt(v['median_db'])}</td>"
+                         f"<td>{_fmt(v['max_complex_error'])}</td></tr>" for k, v in line["errors"].items()) + "</table>")
+    parts.append("<h2>Known disagreements</h2><table><tr><th>what</th><th>why</th><th>matches the exact solution</th></tr>"
+                 + "".join(f"<tr><td style='text-align:left'>{e(k['what'])}</td><td style='text-align:left'>{e(k['reason'])}</td>"
+                           f"<td>{e(k['who_matches_exact'])}</td></tr>" for k in KNOWN_DISAGREEMENTS) + "</table>")
+    parts.append("<h2>Cases</h2>")
+    for c in summary["cases"]:
+        parts.append(f"<h3>{e(c['name'])}</h3><p class=small>{e(c['note'])}. Scene file <code>{e(c['scene_file'])}</code>; "
+                     f"{c['num_rx']} receivers; depth {c['max_depth']}; edge diffraction in Sionna: {c['edge_diffraction']}.</p>")
+        if "gain_" + c["name"] in figures:
+            parts.append(f"<img src='data:image/png;base64,{figures['gain_' + c['name']]}'>")
+        for pol, r in c["polarizations"].items():
+            bk = r["comparison_compat"]["by_kind"]
+            parts.append(f"<p><b>{pol}</b>: by interaction sequence (compat): " + ", ".join(
+                f"{e(k)}: {v['matched']} matched, max |a| diff {_fmt(v['gain_diff_db']['max'])} dB" for k, v in bk.items()) + "</p>")
+            if r["textbook_diffraction_gain_diff_db"]:
+                parts.append("<p class=small>Textbook UTD vs Sionna for the same diffracted paths: " + ", ".join(
+                    f"{e(k)} max {_fmt(v['max'])} dB, median {_fmt(v['median'])} dB"
+                    for k, v in r["textbook_diffraction_gain_diff_db"].items()) + "</p>")
+            reasons = r["comparison_compat"]["only_wavepaths_reasons"]
+            if reasons:
+                parts.append("<p class=small>Only in wavepaths: " + "; ".join(f"{v} x {e(k)}" for k, v in reasons.items()) + "</p>")
+            if r["only_sionna"]:
+                parts.append("<p class=small style='color:#a00'>Only in Sionna: " + "; ".join(
+                    f"{e(x['kinds'])} rx {x['rx']} ({x['length_m']:.3f} m)" for x in r["only_sionna"][:20]) + "</p>")
+    parts.append("</body></html>")
+    with open(path, "w") as f:
+        f.write("\n".join(parts))
+
+
+def run_validation(out_dir: str, quick: bool = False, progress=None) -> dict:
+    """Run the cases and the boundary lines; write ``validation.json`` and ``report.html``."""
+    from .lines import boundary_line, line_errors
+
+    os.makedirs(out_dir, exist_ok=True)
+    cases = [c for c in default_cases() if c.quick or not quick]
+    results, figures = [], {}
+    steps = len(cases) + 2
+    for i, case in enumerate(cases):
+        if progress:
+            progress(i, steps, case.name)
+        r = run_case(case, out_dir)
+        results.append(r)
+        figures["gain_" + case.name] = _gain_figure(r)
+    lines = {}
+    for j, name in enumerate(("half_plane", "wedge")):
+        if progress:
+            progress(len(cases) + j, steps, f"boundary line {name}")
+        line = boundary_line(name, out_dir)
+        lines[name] = {"errors": line_errors(line), "phi_deg": line.phi_deg.tolist(),
+                       "boundaries_deg": line.boundaries_deg, "k_rho": line.k_rho}
+        figures["line_" + name] = _line_figure(line)
+    if progress:
+        progress(steps, steps, "report")
+    summary = {
+        "generated": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "quick": quick,
+        "versions": _versions(),
+        "tolerances": TOLERANCES,
+        "cases": results,
+        "lines": lines,
+        "known_disagreements": KNOWN_DISAGREEMENTS,
+        "passed": all(r["passed"] for r in results),
+    }
+    with open(os.path.join(out_dir, "validation.json"), "w") as f:
+        json.dump(summary, f, indent=1, default=float)
+    write_html(summary, figures, os.path.join(out_dir, "report.html"))
+    return summary

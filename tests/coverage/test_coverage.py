@@ -1,0 +1,242 @@
+"""Coverage maps: each cell equals trace() at its centre, the mechanism split adds up,
+cells inside objects (and only they) are NaN, files round-trip, bad input is refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths import TraceOptions, WavepathsError, load_scene, trace
+from wavepaths.coverage import (
+    MECHANISMS,
+    CoverageMap,
+    CoverageOptions,
+    MeshGrid,
+    PlanarGrid,
+    coverage,
+    inside_solid_objects,
+    solid_objects,
+)
+from wavepaths.em.materials import PEC
+from wavepaths.fields import FieldConfig, compute_fields
+from wavepaths.scene import build_scene
+
+RTOL = 1e-9  # a cell is the same computation as trace() at its centre: only summation order may differ
+IN_PROCESS = CoverageOptions(workers=1, tile_size=16)
+
+
+@pytest.fixture(scope="module")
+def canyon():
+    return load_scene("street_canyon")
+
+
+@pytest.fixture(scope="module")
+def box():
+    return load_scene("box_on_ground")
+
+
+def canyon_grid():
+    # offsets keep every cell centre off the buildings' walls and their planes
+    return PlanarGrid(center=[-37.3, 2.2], size=[56, 50], cell_size=[7, 5], height=1.5)
+
+
+@pytest.fixture(scope="module")
+def canyon_map(canyon):
+    """Two transmitters, reflections to order 2, diffraction with one reflection; several tiles."""
+    return coverage(canyon, [[-60, 0, 10], [-20, 4, 6]], canyon_grid(), TraceOptions(), settings=IN_PROCESS)
+
+
+def reference(scene, tx, points, options=None, config=None):
+    paths = trace(scene, tx, points, options or TraceOptions())
+    return paths, compute_fields(scene, paths, config or FieldConfig())
+
+
+# ---- a cell is trace() at its centre ---------------------------------------------------
+def test_cell_value_equals_trace_at_cell_centre(canyon, canyon_map):
+    flat = canyon_map.cell_centers.reshape(-1, 3)
+    out = ~canyon_map.inside.ravel()
+    assert out.sum() > 30 and canyon_map.inside.any()
+    paths, ref = reference(canyon, canyon_map.tx_positions, flat[out])
+    for coherent in (True, False):
+        got = canyon_map.path_gain_per_tx(coherent).reshape(2, -1)[:, out]
+        want = ref.path_gain(coherent)
+        assert (want > 0).mean() > 0.8
+        np.testing.assert_allclose(got, want, rtol=RTOL, atol=0)
+    # path counts per cell, and the map's best server is the strongest transmitter
+    counts = np.zeros((2, out.sum()), int)
+    np.add.at(counts, (paths.tx_index, paths.rx_index), 1)
+    np.testing.assert_array_equal(canyon_map.num_paths.sum(axis=0).reshape(2, -1)[:, out], counts)
+    best = canyon_map.best_server.ravel()[out]
+    np.testing.assert_array_equal(best, np.argmax(ref.path_gain(True), axis=0))
+    np.testing.assert_allclose(canyon_map.path_gain().ravel()[out], ref.path_gain(True).max(axis=0), rtol=RTOL)
+
+
+def test_received_power_and_field_strength_match_the_field_result(canyon):
+    cfg = FieldConfig(frequency_hz=2.4e9, tx_power_dbm=33.0)
+    grid = PlanarGrid(center=[-61.3, -2.1, 1.5], size=[21, 14], cell_size=7)
+    cmap = coverage(canyon, [-60, 0, 10], grid, fields=cfg, settings=IN_PROCESS)
+    _, ref = reference(canyon, [[-60, 0, 10]], cmap.cell_centers.reshape(-1, 3), config=cfg)
+    np.testing.assert_allclose(cmap.received_power_dbm(0).ravel(), ref.received_power_dbm()[0], rtol=RTOL)
+    np.testing.assert_allclose(cmap.field_strength_dbuv_m().ravel(), ref.field_strength_dbuv_m()[0], rtol=RTOL)
+    np.testing.assert_allclose(cmap.received_power_dbm(), 33.0 + cmap.path_gain_db(), rtol=1e-12)
+
+
+def test_mesh_grid_cells_are_traced_at_face_centroids(box):
+    verts = np.array([[-20, -15, 2.0], [20, -15, 2.0], [20, 15, 3.0], [-20, 15, 3.0], [-20.0, 0.0, 8.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]])
+    mesh = MeshGrid(verts, faces, offset=0.25)
+    cmap = coverage(box, [12, -14, 6], mesh, TraceOptions(max_reflections=1), settings=IN_PROCESS)
+    assert cmap.shape == (3,) and cmap.cell_centers.shape == (3, 3)
+    centroid = verts[faces].mean(axis=1)
+    assert np.allclose(np.linalg.norm(cmap.cell_centers - centroid, axis=1), 0.25)
+    _, ref = reference(box, [[12, -14, 6]], cmap.cell_centers, TraceOptions(max_reflections=1))
+    np.testing.assert_allclose(cmap.path_gain(0), ref.path_gain()[0], rtol=RTOL)
+
+
+# ---- mechanisms ------------------------------------------------------------------------
+def test_mechanism_split_adds_up_to_the_incoherent_total(canyon, canyon_map):
+    total = canyon_map.path_gain_per_tx(coherent=False)
+    split = sum(canyon_map.power_sum[i] for i in range(3))
+    np.testing.assert_allclose(split, total, rtol=1e-12)
+    for tx in (0, 1):
+        parts = sum(canyon_map.mechanism_gain(m, tx) for m in MECHANISMS)
+        np.testing.assert_allclose(parts, canyon_map.path_gain(tx, coherent=False), rtol=1e-12)
+    # coherent sums per mechanism add up to the coherent total amplitude
+    np.testing.assert_allclose(canyon_map.a_sum.sum(axis=0), canyon_map.a_total, rtol=1e-9, atol=1e-300)
+    # each mechanism has what trace() calls it: no interaction / reflections only / a diffraction
+    flat = canyon_map.cell_centers.reshape(-1, 3)
+    out = ~canyon_map.inside.ravel()
+    paths, ref = reference(canyon, canyon_map.tx_positions[:1], flat[out])
+    diffracted = (paths.interactions == 2).any(axis=1)
+    kinds = {"los": paths.depth == 0, "reflection": (paths.depth > 0) & ~diffracted, "diffraction": diffracted}
+    for name, sel in kinds.items():
+        want = np.zeros(out.sum())
+        np.add.at(want, paths.rx_index[sel], np.abs(ref.a[sel]) ** 2)
+        np.testing.assert_allclose(canyon_map.mechanism_gain(name, 0).ravel()[out], want, rtol=1e-12)
+        assert want.max() > 0
+
+
+def test_incoherent_option_changes_only_the_default_sum(canyon):
+    grid = PlanarGrid(center=[-61.3, -2.1], size=[14, 7], cell_size=7, height=1.5)
+    coh = coverage(canyon, [-60, 0, 10], grid, settings=IN_PROCESS)
+    inc = coverage(canyon, [-60, 0, 10], grid, settings=CoverageOptions(workers=1, coherent=False))
+    np.testing.assert_array_equal(inc.path_gain(), coh.path_gain(coherent=False))
+    np.testing.assert_array_equal(coh.path_gain(), np.abs(coh.a_total[0]) ** 2)
+
+
+# ---- cells inside objects ----------------------------------------------------------------
+def test_cells_inside_objects_are_nan_and_only_they(box):
+    # 1 m cells: centres at +-0.5, +-1.5, ...: none on the box walls at +-5
+    grid = PlanarGrid(center=[0, 0], size=[30, 20], cell_size=1.0, height=5.0)
+    cmap = coverage(box, [-14.2, -8.1, 7.0], grid, TraceOptions(max_reflections=1, diffraction=False),
+                    settings=CoverageOptions(workers=1, tile_size=128))
+    c = cmap.cell_centers
+    expected = (np.abs(c[..., 0]) < 5) & (np.abs(c[..., 1]) < 5)
+    assert expected.sum() == 100
+    for q in ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m", "los_gain_db"):
+        values = cmap.quantity(q)
+        np.testing.assert_array_equal(np.isnan(values), expected)
+    assert (cmap.num_paths.sum(axis=(0, 1))[expected] == 0).all()
+    assert (cmap.best_server[expected] == -1).all()
+
+
+def test_inside_test_is_robust_on_edges_diagonals_and_open_bases():
+    # a closed box, the same box without a floor, and a flat ground (never solid)
+    def box_arrays(lo, hi, bottom):
+        (x0, y0, z0), (x1, y1, z1) = lo, hi
+        v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
+                      [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
+        quads = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)] + ([(0, 3, 2, 1)] if bottom else [])
+        return v, np.array([t for a, b, c, d in quads for t in ([a, b, c], [a, c, d])])
+
+    va, ta = box_arrays((0, 0, 0), (4, 4, 6), True)
+    vb, tb = box_arrays((10, 0, 0), (14, 4, 6), False)
+    vg = np.array([[-20, -20, 0], [30, -20, 0], [30, 20, 0], [-20, 20, 0]], float)
+    tg = np.array([[0, 1, 2], [0, 2, 3]])
+    # the open box's roof is its own object (as Sionna RT's city scenes split roof and walls)
+    obj_b = np.where(np.arange(len(tb)) < 2, 2, 1)
+    scene = build_scene(np.concatenate([va, vb, vg]), np.concatenate([ta, tb + 8, tg + 16]),
+                        np.concatenate([np.zeros(len(ta), int), obj_b, [3, 3]]), np.zeros(len(ta) + len(tb) + 2, int),
+                        ["closed", "open_base_walls", "open_base_roof", "ground"], [PEC])
+    solids = solid_objects(scene)
+    assert solids.objects.tolist() == [(0,), (1, 2)] and solids.closed.tolist() == [True, False]
+    # points on the diagonals of the roof quads' triangulation, on a regular lattice, below the base
+    t = np.linspace(0.25, 3.75, 15)
+    diag = np.stack([t, t, np.full_like(t, 3.0)], axis=1)
+    anti = np.stack([t, 4 - t, np.full_like(t, 5.0)], axis=1)
+    pts = np.concatenate([diag, anti, diag + [10, 0, 0], anti + [10, 0, 0]])
+    assert inside_solid_objects(scene, pts).all()
+    outside = np.array([[2, 2, 6.5], [2, 2, -0.5], [12, 2, -0.5], [-1, 2, 3], [7, 2, 3], [12, 2, 6.01], [2, -0.01, 1]])
+    assert not inside_solid_objects(scene, outside).any()
+
+
+# ---- files and pictures -----------------------------------------------------------------
+def test_npz_round_trip_and_keys(canyon_map, tmp_path):
+    path = canyon_map.save(tmp_path / "map.npz")
+    with np.load(path, allow_pickle=False) as data:
+        assert data["path_gain_db"].shape == canyon_map.shape == (10, 8)
+        assert data["cell_centers"].shape == (10, 8, 3)
+        np.testing.assert_array_equal(np.isnan(data["path_gain_db"]), canyon_map.inside)
+        assert not np.isnan(data["cell_centers"]).any()
+    back = CoverageMap.load(path)
+    for name in ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m", "diffraction_gain_db"):
+        np.testing.assert_array_equal(back.quantity(name), canyon_map.quantity(name))
+    np.testing.assert_array_equal(back.best_server, canyon_map.best_server)
+    np.testing.assert_array_equal(back.cell_centers, canyon_map.cell_centers)
+    assert back.metadata["trace_options"]["max_reflections"] == 2
+    assert back.elapsed_s == canyon_map.elapsed_s > 0
+    with pytest.raises(WavepathsError, match="not a wavepaths coverage map"):
+        np.savez(tmp_path / "other.npz", x=np.zeros(3))
+        CoverageMap.load(tmp_path / "other.npz")
+
+
+def test_vertical_grid_orientation_and_plot(tmp_path):
+    scene = load_scene("slit_shutter")
+    grid = PlanarGrid(center=[0.05, 3.9, 2.03], size=[2, 1], cell_size=0.5, orientation=[0, 0, np.pi / 2])
+    c = grid.cell_centers()
+    assert c.shape == (2, 4, 3)
+    np.testing.assert_allclose(c[..., 1], 3.9)  # a wall at y = 3.9: u = x, v = z
+    np.testing.assert_allclose(c[0, :, 0], [-0.70, -0.20, 0.30, 0.80])
+    np.testing.assert_allclose(c[:, 0, 2], [1.78, 2.28])
+    cmap = coverage(scene, [0.1, -6, 1.6], grid, TraceOptions(max_reflections=1), settings=IN_PROCESS)
+    from wavepaths.coverage.plot import save_png
+
+    out = save_png(cmap, str(tmp_path / "wall.png"), scene=scene)
+    assert (tmp_path / "wall.png").stat().st_size > 1000 and out.endswith(".png")
+
+
+# ---- bad input -----------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: PlanarGrid([0, 0], [0, 10], 1.0, height=1.5), "empty grid"),
+        (lambda: PlanarGrid([0, 0], [10, 10], 0.0, height=1.5), "`cell_size` must be positive"),
+        (lambda: PlanarGrid([np.nan, 0], [10, 10], 1.0, height=1.5), "`center` has NaN"),
+        (lambda: PlanarGrid([0, 0], [10, 10], 1.0), "give the grid's `height`"),
+        (lambda: PlanarGrid([0, 0, 1], [10, 10], 1.0, height=2.0), "give one of them"),
+        (lambda: MeshGrid(np.zeros((3, 3)), np.zeros((0, 3), int)), "no cells"),
+        (lambda: MeshGrid([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]], [[0, 1, 2]]), "NaN"),
+    ],
+)
+def test_bad_grids_are_clear_errors(make, message):
+    with pytest.raises(WavepathsError, match=message):
+        make()
+
+
+def test_bad_coverage_calls_are_clear_errors(box):
+    grid = PlanarGrid([0, 0], [30, 30], 3.0, height=5.0)
+    with pytest.raises(WavepathsError, match="`tx` has NaN"):
+        coverage(box, [np.nan, 0, 1], grid, settings=IN_PROCESS)
+    with pytest.raises(WavepathsError, match="inside a solid object"):
+        coverage(box, [0, 0, 5], grid, settings=IN_PROCESS)
+    with pytest.raises(WavepathsError, match=r"cell \(0, 0\) has its centre on transmitter 0"):
+        coverage(box, grid.cell_centers()[0, 0], grid, settings=IN_PROCESS)
+    huge = PlanarGrid([0, 0], [1e5, 1e5], 0.01, height=5.0)
+    with pytest.raises(WavepathsError, match=r"100,000,000,000,000 cells \(10000000 x 10000000\).* GiB"):
+        coverage(box, [0, 0, 20], huge, settings=IN_PROCESS)
+    with pytest.raises(WavepathsError, match="`grid` must be a PlanarGrid or MeshGrid"):
+        coverage(box, [0, 0, 20], np.zeros((4, 3)), settings=IN_PROCESS)
+    with pytest.raises(WavepathsError, match="`tile_size` must be a positive integer"):
+        CoverageOptions(tile_size=0)
+    with pytest.raises(WavepathsError, match="`quantity` must be one of"):
+        coverage(box, [0, 0, 20], PlanarGrid([20, 20], 2, 2, height=1), settings=IN_PROCESS).quantity("gain")

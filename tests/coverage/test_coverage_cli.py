@@ -1,0 +1,40 @@
+"""The installed ``wavepaths coverage`` console script."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+WAVEPATHS = os.path.join(os.path.dirname(sys.executable), "wavepaths")
+
+
+def run(*args):
+    return subprocess.run([WAVEPATHS, "coverage", *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_cli_writes_png_and_npz(tmp_path):
+    r = run("box_on_ground", "--tx", -14.2, -8.1, 7, "--height", 5, "--cell", 2, "--size", 30, 20, "--center", 0.3, 0.3,
+            "--max-reflections", 1, "--out", tmp_path, "--workers", 1, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    assert (tmp_path / "coverage.png").stat().st_size > 1000
+    with np.load(tmp_path / "coverage.npz", allow_pickle=False) as data:
+        gain, centres = data["path_gain_db"], data["cell_centers"]
+        assert gain.shape == (10, 15) and centres.shape == (10, 15, 3)
+        inside = (np.abs(centres[..., 0]) < 5) & (np.abs(centres[..., 1]) < 5)
+        np.testing.assert_array_equal(np.isnan(gain), inside)
+        np.testing.assert_allclose(centres[..., 2], 5.0)
+    assert "cells/s" in r.stdout
+
+
+def test_cli_bad_input_exits_2_without_traceback(tmp_path):
+    for args in (["--tx", "nan", 0, 1, "--height", 5, "--cell", 2],
+                 ["--tx", 0, 0, 20, "--height", 5, "--cell", 0],
+                 ["--tx", 0, 0, 20, "--cell", 2],
+                 ["--tx", 0, 0, 5, "--height", 5, "--cell", 2]):
+        r = run("box_on_ground", *args, "--out", tmp_path, "--workers", 1, "--quiet")
+        assert r.returncode == 2, (args, r.stderr)
+        assert "Traceback" not in r.stderr and "wavepaths coverage: error:" in r.stderr

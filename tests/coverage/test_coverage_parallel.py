@@ -1,0 +1,69 @@
+"""The same tiles in this process, in a local process pool and on a Dask cluster give
+the same map; the scene and the transmitter context survive pickling."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from wavepaths import TraceOptions, build_tx_context, load_scene
+from wavepaths.coverage import CoverageOptions, PlanarGrid, coverage, solve_tile
+from wavepaths.fields import FieldConfig
+
+OPTIONS = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=1)
+
+
+@pytest.fixture(scope="module")
+def canyon():
+    return load_scene("street_canyon")
+
+
+@pytest.fixture(scope="module")
+def grid():
+    return PlanarGrid(center=[-37.3, 2.2], size=[56, 30], cell_size=[7, 5], height=1.5)
+
+
+@pytest.fixture(scope="module")
+def in_process(canyon, grid):
+    return coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(workers=1, tile_size=8))
+
+
+def assert_same_map(a, b):
+    np.testing.assert_array_equal(a.inside, b.inside)
+    np.testing.assert_array_equal(a.num_paths, b.num_paths)
+    # same arithmetic on the same tiles: equal to the last bit, checked with a float tolerance
+    np.testing.assert_allclose(a.a_total, b.a_total, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(a.power_sum, b.power_sum, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(a.path_gain_db(), b.path_gain_db(), rtol=1e-12, atol=0)
+
+
+def test_scene_and_context_pickle_and_solve_the_same_tile(canyon, grid):
+    ctx = build_tx_context(canyon, np.array([[-60.0, 0, 10]]), OPTIONS)
+    canyon.raycaster  # the Embree handle must not travel
+    scene2, ctx2 = pickle.loads(pickle.dumps((canyon, ctx)))
+    rx = grid.cell_centers().reshape(-1, 3)[:12]
+    rx = rx[(np.abs(rx[:, 1]) < 10)]
+    a = solve_tile(canyon, ctx, FieldConfig(), rx)
+    b = solve_tile(scene2, ctx2, FieldConfig(), rx)
+    np.testing.assert_array_equal(a.a_total, b.a_total)
+    np.testing.assert_array_equal(a.num_paths, b.num_paths)
+
+
+def test_local_process_pool_gives_the_same_map(canyon, grid, in_process):
+    pooled = coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(workers=2, tile_size=8))
+    assert pooled.metadata["workers"] == "local pool of 2 processes"
+    assert pooled.metadata["tiles"] > 2
+    assert_same_map(pooled, in_process)
+
+
+def test_dask_cluster_gives_the_same_map(canyon, grid, in_process):
+    distributed = pytest.importorskip("distributed")
+    # two small worker processes: the scene and the context really travel (pickled, Embree rebuilt there)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client:
+            on_dask = coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(tile_size=8),
+                               client=client)
+    assert on_dask.metadata["workers"].startswith("dask ")
+    assert_same_map(on_dask, in_process)
