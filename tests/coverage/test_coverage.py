@@ -170,6 +170,19 @@ def test_inside_test_is_robust_on_edges_diagonals_and_open_bases():
     assert not inside_solid_objects(scene, outside).any()
 
 
+def test_solids_across_objects_and_within_components():
+    # blocks touching along one edge (four faces on it) are one solid; the block with an
+    # awning hinged on its roof edge (three faces) is found object by object
+    touching = load_scene("touching_blocks")
+    assert [len(o) for o in solid_objects(touching).objects] == [2]
+    pts = np.array([[2, 2, 3], [6, 6, 3], [6, 2, 3], [2, 6, 3]])
+    np.testing.assert_array_equal(inside_solid_objects(touching, pts), [True, True, False, False])
+    awning = load_scene("three_face_edge")
+    solids = solid_objects(awning)
+    assert [awning.object_names[o] for o in solids.objects[0]] == ["block"] and len(solids) == 1
+    np.testing.assert_array_equal(inside_solid_objects(awning, [[2, 2, 2], [5, 2, 3.9]]), [True, False])
+
+
 # ---- files and pictures -----------------------------------------------------------------
 def test_npz_round_trip_and_keys(canyon_map, tmp_path):
     path = canyon_map.save(tmp_path / "map.npz")

@@ -4,8 +4,8 @@ A planar map is drawn in the grid's plane: axes that coincide with a world axis 
 labelled and offset like it (a horizontal grid shows world ``x``, ``y``; the vertical
 wall of the shutter example shows ``x``, ``z``). The scene is drawn as the lines where
 its triangles cut the grid's plane (building walls at the receiver height), cells inside
-solid objects are left blank (grey), cells no path reaches take the colour bar's
-"under" colour, and each transmitter is a red star at its projection on the plane.
+solid objects are light grey, cells no path reaches dark grey (the colour bar's "under"
+triangle; values merely below the colour range take its lowest colour), and each transmitter is a red star at its projection on the plane.
 """
 
 from __future__ import annotations
@@ -104,6 +104,7 @@ def plot_coverage(
     colormap: str = "viridis",
     title: str | None = None,
     colorbar: bool = True,
+    aspect: str | float = "equal",
 ):
     """Draw one quantity of a coverage map; returns the matplotlib ``AxesImage`` or collection.
 
@@ -119,7 +120,11 @@ def plot_coverage(
     scene : Scene, optional
         Draws where the scene cuts the map's plane.
     vmin, vmax : float, optional
-        Colour range; default the finite values, at most ``dynamic_range_db`` wide.
+        Colour range; default the finite values, at most ``dynamic_range_db`` wide. Values
+        below it take its lowest colour; the colour bar's "under" colour (dark grey, the
+        triangle) marks cells that no path reaches, light grey cells inside objects.
+    aspect : "equal", "auto" or float
+        As matplotlib's ``imshow``.
     """
     import matplotlib
     from matplotlib.collections import LineCollection
@@ -134,7 +139,8 @@ def plot_coverage(
         ax = fig.add_subplot()
     colors = matplotlib.colormaps[colormap].with_extremes(bad="0.85", under="0.15")
     label = LABELS.get(quantity, quantity)
-    shown = np.where(np.isneginf(values), vmin - 1.0, values)
+    # finite values below the range take its lowest colour; the "under" colour means no path
+    shown = np.where(np.isneginf(values), vmin - 1.0, np.maximum(values, vmin))
     tx_local = None
     if isinstance(cmap.grid, PlanarGrid):
         g = cmap.grid
@@ -143,7 +149,7 @@ def plot_coverage(
         hu, hv = 0.5 * g.cell_size
         extent = [ou + su * (u[0] - hu), ou + su * (u[-1] + hu), ov + sv * (v[0] - hv), ov + sv * (v[-1] + hv)]
         art = ax.imshow(shown, origin="lower", extent=extent, cmap=colors, vmin=vmin, vmax=vmax,
-                        interpolation="nearest", aspect="equal")
+                        interpolation="nearest", aspect=aspect)
         if scene is not None:
             cuts = plane_cuts(scene, g)
             if len(cuts):
@@ -159,7 +165,7 @@ def plot_coverage(
         m = cmap.grid
         art = ax.tripcolor(m.vertices[:, 0], m.vertices[:, 1], m.faces, facecolors=shown, cmap=colors,
                            vmin=vmin, vmax=vmax)
-        ax.set_aspect("equal")
+        ax.set_aspect(aspect)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         tx_local = cmap.tx_positions[:, :2]
@@ -169,8 +175,7 @@ def plot_coverage(
             for i, (x, y) in enumerate(tx_local):
                 ax.annotate(f"tx {i}", (x, y), textcoords="offset points", xytext=(6, 6), color="r")
     if colorbar:
-        below = np.isneginf(values) | (np.isfinite(values) & (values < vmin))
-        extend = "min" if below.any() else "neither"
+        extend = "min" if np.isneginf(values).any() else "neither"  # the triangle: cells no path reaches
         ax.figure.colorbar(art, ax=ax, label=label, extend=extend)
     ax.set_title(title if title is not None else label)
     return art

@@ -185,8 +185,8 @@ def coverage(
     ------
     WavepathsError
         A transmitter that is NaN, inside a solid object or at a cell centre; a grid
-        whose result would not fit ``settings.max_memory_bytes``; options of the wrong
-        type.
+        whose result would not fit ``settings.max_memory_bytes``; a material without
+        values at the frequency; options of the wrong type.
     """
     from .parallel import run_tiles
 
@@ -196,6 +196,7 @@ def coverage(
     cov = settings or CoverageOptions()
     _check_types(scene, grid, opts, cfg, cov)
     tx = check_positions("tx", tx)
+    _check_materials(scene, cfg)
     m = len(tx)
     n = grid.num_cells
     need = n * (RESULT_BYTES_PER_CELL + m * RESULT_BYTES_PER_CELL_TX)
@@ -294,6 +295,16 @@ def _check_types(scene, grid, opts, cfg, cov) -> None:
         if not isinstance(value, kind):
             want = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
             raise WavepathsError(f"`{name}` must be a {want}, got {type(value).__name__}")
+
+
+def _check_materials(scene: Scene, cfg: FieldConfig) -> None:
+    """Fail before tracing, not in a worker, when a material has no value at the frequency."""
+    from ..em.materials import relative_permittivity
+
+    for i in np.unique(scene.triangle_material):
+        material = scene.materials[i]
+        if material.kind not in ("pec", "absorber"):
+            relative_permittivity(material, cfg.frequency_hz)  # raises WavepathsError out of range
 
 
 def _check_off_transmitters(scene: Scene, tx: np.ndarray, flat: np.ndarray, active: np.ndarray, grid: Grid) -> None:

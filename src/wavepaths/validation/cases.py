@@ -71,8 +71,11 @@ def default_cases() -> list[Case]:
         Case("box_on_ground", "box_on_ground", np.array([[-15.0, -12.0, 3.0]]),
              ring(14.0, np.arange(0, 360, 30), 1.5), max_depth=2, note="a box standing on the ground"),
         Case("three_face_edge", "three_face_edge", np.array([[9.0, 2.0, 7.0]]),
-             np.stack([np.linspace(-3, 10, 10), np.full(10, 2.5), np.full(10, 6.5)], axis=1), max_depth=2,
-             edge_diffraction=True, note="a box with an awning on its roof edge"),
+             np.concatenate([np.stack([np.linspace(-3, 10, 10), np.full(10, 2.5), np.full(10, 6.5)], axis=1),
+                             np.array([[4.6, 2.5, 3.2], [5.0, 1.5, 3.0], [5.3, 2.0, 2.6], [4.4, 3.0, 2.0]])]),
+             max_depth=2, edge_diffraction=True, quick=True,
+             note="a box with an awning on its roof edge; the last four receivers sit in the pocket under the "
+                  "awning, which no diffracted path from above the roof can reach around that edge"),
     ]
 
 

@@ -24,6 +24,15 @@ KNOWN_DISAGREEMENTS = [
         "who_matches_exact": "wavepaths (UTD)",
     },
     {
+        "id": "both-faces-lit-face-choice",
+        "what": "On a wedge whose two faces are both lit, Sionna's diffracted field depends on which face its "
+                "sampled ray hit",
+        "reason": "Sionna takes the face its candidate ray hit as the 0-face, and its combination "
+                  "R0 (d1 - d4) + Rn (d2 - d3) is not symmetric under exchanging the faces; compat='sionna' takes the "
+                  "face with phi' < pi and so reproduces Sionna only where one face is lit.",
+        "who_matches_exact": "wavepaths (UTD)",
+    },
+    {
         "id": "diffraction-between-objects",
         "what": "Edges shared by two objects (a box standing on a ground plane, blocks touching) diffract in "
                 "wavepaths, not in Sionna",

@@ -30,7 +30,7 @@ from ..fields import FieldConfig, compute_fields
 from ..scene import load_scene, write_mitsuba_xml
 from ..search import TraceOptions, trace
 
-S_PRIME = 1000.0
+S_PRIME = 10_000.0  # plane-wave approximation: curvature error k rho^2 / 2 s' ~ 4e-3
 SPEED_OF_LIGHT = 299_792_458.0
 
 
@@ -80,7 +80,7 @@ def _keep_edge(vertices, depth, interactions, edge_is_diff):
     return keep
 
 
-def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rho: float = 1.5,
+def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rho: float = 1.0,
                   with_sionna: bool = True) -> BoundaryLine:
     """Compute the normalised total field along the circle for every engine available."""
     import os
@@ -129,10 +129,10 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             curves[("exact", pol)] = halfplane_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), soft_hard)
         else:
             curves[("exact", pol)] = wedge_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), n, soft_hard)
-    bounds = {"shadow boundary": phi_p_deg + 180.0 if phi_p_deg + 180 < n * 180 else phi_p_deg - 180.0,
-              "0-face reflection boundary": 180.0 - phi_p_deg}
-    if (2 * n - 1) * 180 - phi_p_deg < n * 180:
-        bounds["n-face reflection boundary"] = (2 * n - 1) * 180 - phi_p_deg
+    candidates = {"shadow boundary": phi_p_deg + 180.0 if phi_p_deg < 180 else phi_p_deg - 180.0,
+                  "0-face reflection boundary": 180.0 - phi_p_deg,
+                  "n-face reflection boundary": (2 * n - 1) * 180 - phi_p_deg}
+    bounds = {k: v for k, v in candidates.items() if 0 < v < n * 180}
     return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds)
 
 

@@ -55,7 +55,7 @@ def _explainer(scene, paths, sn, case: Case):
 
     def explain(side: str, i: int) -> str:
         if side == "sionna":
-            return "found by Sionna only: not found by wavepaths (a failure)"
+            return _explain_sionna_only(scene, sn, i)
         kinds = paths.interactions[i, : paths.depth[i]]
         if (kinds == 2).any():
             d = int(paths.primitive[i][kinds.tolist().index(2)])
@@ -70,6 +70,48 @@ def _explainer(scene, paths, sn, case: Case):
         return "Sionna's ray sampling (or its path cap) missed it"
 
     return explain
+
+
+SIONNA_ONLY_TOPOLOGY = "topology rule: Sionna ignores another object's face on this edge; the path leaves its topological volume (seed §3.1, figure 4)"
+SIONNA_ONLY_FAILURE = "found by Sionna only: not found by wavepaths (a failure)"
+
+
+def _multi_object_dihedra(scene) -> set:
+    """Dihedra whose faces belong to more than one object (Sionna sees only its own mesh's wedge)."""
+    dih = scene.dihedra
+    out = set()
+    for d in np.nonzero(dih.face_count >= 2)[0]:
+        if len(set(scene.triangle_object[dih.face_triangle[dih.faces(d)]].tolist())) > 1:
+            out.add(int(d))
+    return out
+
+
+def _diffraction_dihedron(paths, i: int) -> int:
+    kinds = paths.interactions[i, : paths.depth[i]].tolist()
+    return int(paths.primitive[i, kinds.index(2)]) if 2 in kinds else -1
+
+
+def _explain_sionna_only(scene, sn, j: int) -> str:
+    """Why a Sionna path has no wavepaths match: a topology rule wavepaths enforces, or a failure."""
+    from ..topology.find_dihedron import find_dihedron
+
+    kinds = sn.interactions[j, : sn.num_interactions[j]]
+    if not (kinds == 2).any():
+        return SIONNA_ONLY_FAILURE
+    k = kinds.tolist().index(2)
+    v = sn.vertices[j]
+    p, e, r = v[k + 1], v[k], v[k + 2]
+    dih = scene.dihedra
+    rel = p - dih.origin
+    t = np.einsum("ij,ij->i", rel, dih.direction)
+    dist = np.linalg.norm(rel - t[:, None] * dih.direction, axis=1)
+    on = np.nonzero((dist < 1e-3) & (t > -1e-3) & (t < dih.length + 1e-3))[0]
+    for d in on:
+        if dih.face_count[d] >= 3:
+            res = find_dihedron(dih, np.array([d]), p[None], e[None], r[None])
+            if not res.valid[0]:
+                return SIONNA_ONLY_TOPOLOGY
+    return SIONNA_ONLY_FAILURE
 
 
 def run_case(case: Case, out_dir: str) -> dict:
@@ -110,24 +152,32 @@ def run_case(case: Case, out_dir: str) -> dict:
         g_wp_all = textbook.path_gain_db()
         summary = comp.summary()
         violations = []
+        topo = _multi_object_dihedra(scene)
+        different_wedge = 0
         for mm in comp.matches:
+            if "D" in mm.kinds and _diffraction_dihedron(paths, mm.wp_index) in topo:
+                # wavepaths' true dihedron takes another object's face on this edge; Sionna's wedge is
+                # its mesh's own two faces: a different exterior angle, a known topology difference
+                different_wedge += 1
+                continue
             if abs(mm.delay_rel_error) > TOLERANCES["delay_rel"]:
                 violations.append(f"delay {mm.kinds} rx {mm.rx}: {mm.delay_rel_error:.2e}")
             tol = TOLERANCES["gain_db_diffraction_compat"] if "D" in mm.kinds else TOLERANCES["gain_db_los_reflection"]
             if np.isfinite(mm.gain_diff_db) and abs(mm.gain_diff_db) > tol:
                 violations.append(f"|a| {mm.kinds} rx {mm.rx}: {mm.gain_diff_db:+.3f} dB")
-        if summary["only_sionna"]:
-            violations.append(f"{summary['only_sionna']} path(s) found by Sionna only")
+        failures = [x for x in comp.only_sionna if x["reason"] == SIONNA_ONLY_FAILURE]
+        if failures:
+            violations.append(f"{len(failures)} path(s) found by Sionna only")
         textbook_d = comp_tb.summary()["by_kind"]
         result["polarizations"][pol] = {
             "comparison_compat": summary,
+            "matched_on_multi_object_edges": different_wedge,
             "textbook_diffraction_gain_diff_db": {k: v["gain_diff_db"] for k, v in textbook_d.items() if "D" in k},
             "only_wavepaths": comp.only_wavepaths[:200],
             "only_sionna": comp.only_sionna[:200],
             "total_gain_db": {"sionna": g_sn.tolist(), "wavepaths_matched_compat": g_wp_matched.tolist(),
                               "wavepaths_all_textbook": g_wp_all.tolist()},
-            "total_gain_diff_db_matched": _finite_max(np.abs(np.where(np.isfinite(g_sn) & np.isfinite(g_wp_matched),
-                                                                     g_wp_matched - g_sn, np.nan))),
+            "total_gain_diff_db_matched": _finite_max(_finite_diff(g_wp_matched, g_sn)),
             "sionna_paths": int(len(sn.tx_index)),
             "sionna_time_s": sn.elapsed_s,
             "sionna_warmup_s": sn.warmup_s,
@@ -137,6 +187,11 @@ def run_case(case: Case, out_dir: str) -> dict:
         }
     result["passed"] = all(v["passed"] for v in result["polarizations"].values())
     return result
+
+
+def _finite_diff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    both = np.isfinite(a) & np.isfinite(b)
+    return np.abs(a[both] - b[both])
 
 
 def _finite_max(x: np.ndarray):
@@ -277,7 +332,7 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
         "<th>Sionna [s]</th><th>verdict</th></tr>" + "".join(rows) + "</table>",
     ]
     parts.append("<h2>Across shadow and reflection boundaries: who matches the exact solution</h2>"
-                 "<p>A transmitter 1 km away lights the edge (a plane wave); receivers on a circle around it. "
+                 "<p>A transmitter 10 km away lights the edge (a plane wave); receivers on a circle around it. "
                  "|u| is the total field (line of sight, reflection, diffraction by this edge) relative to the "
                  "incident field at the edge. Black: the exact solution (Sommerfeld's half-plane; the wedge "
                  "eigenfunction series).</p>")
@@ -304,6 +359,10 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
                 parts.append("<p class=small>Textbook UTD vs Sionna for the same diffracted paths: " + ", ".join(
                     f"{e(k)} max {_fmt(v['max'])} dB, median {_fmt(v['median'])} dB"
                     for k, v in r["textbook_diffraction_gain_diff_db"].items()) + "</p>")
+            if r.get("matched_on_multi_object_edges"):
+                parts.append(f"<p class=small>{r['matched_on_multi_object_edges']} matched diffracted path(s) lie on edges "
+                             "shared by several objects: wavepaths' true dihedron (seed §3.3) differs from Sionna's "
+                             "single-mesh wedge, so their coefficients are not held to the tolerance.</p>")
             reasons = r["comparison_compat"]["only_wavepaths_reasons"]
             if reasons:
                 parts.append("<p class=small>Only in wavepaths: " + "; ".join(f"{v} x {e(k)}" for k, v in reasons.items()) + "</p>")

@@ -1,0 +1,109 @@
+"""The validation report against the real Sionna RT (quick subset), with its tolerances.
+
+These tests fail CI when a tolerance breaks: matched paths within 1e-6 in delay, 0.1 dB for
+line of sight and reflections, 0.5 dB for diffraction in compat mode, and no path that
+Sionna finds and wavepaths does not. The known disagreements run as strict expected
+failures: the day Sionna RT agrees with the exact solution on one of them, its test fails.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.sionna
+
+
+def _sionna_or_skip():
+    from wavepaths.errors import DependencyError
+    from wavepaths.validation.sionna_env import ensure_sionna
+
+    try:
+        ensure_sionna()
+    except DependencyError as exc:  # pragma: no cover - CI installs Sionna RT
+        pytest.skip(f"Sionna RT is not usable here: {exc}")
+
+
+@pytest.fixture(scope="module")
+def quick_report(tmp_path_factory):
+    _sionna_or_skip()
+    from wavepaths.validation.report import run_validation
+
+    out = tmp_path_factory.mktemp("validation")
+    summary = run_validation(str(out), quick=True)
+    return out, summary
+
+
+def test_quick_validation_passes_its_tolerances(quick_report):
+    out, summary = quick_report
+    bad = [(c["name"], pol, r["violations"]) for c in summary["cases"] for pol, r in c["polarizations"].items()
+           if not r["passed"]]
+    assert not bad, bad
+    assert summary["passed"]
+    # not vacuous: every case matched paths of every kind it should have
+    kinds = set()
+    for c in summary["cases"]:
+        for r in c["polarizations"].values():
+            assert r["comparison_compat"]["matched"] > 0
+            kinds |= set(r["comparison_compat"]["by_kind"])
+    assert {"LOS", "R", "D"} <= kinds
+    d = json.loads((out / "validation.json").read_text())
+    assert d["cases"] and (out / "report.html").stat().st_size > 50_000  # tables and embedded plots
+
+
+def test_every_sionna_path_is_found_by_wavepaths(quick_report):
+    from wavepaths.validation.report import SIONNA_ONLY_FAILURE
+
+    _, summary = quick_report
+    for c in summary["cases"]:
+        for r in c["polarizations"].values():
+            assert not [x for x in r["only_sionna"] if x["reason"] == SIONNA_ONLY_FAILURE], c["name"]
+
+
+def test_wavepaths_utd_matches_the_exact_solutions(quick_report):
+    _, summary = quick_report
+    for name, line in summary["lines"].items():
+        for pol in ("soft", "hard"):
+            err = line["errors"][f"wavepaths UTD ({pol})"]
+            # point source 10 km away instead of a plane wave, k rho ~ 73
+            assert err["max_complex_error"] < 0.02, (name, pol, err)
+            assert err["median_db"] < 0.01, (name, pol, err)
+
+
+@pytest.mark.xfail(strict=True, reason="known disagreement 'hard-polarisation-coefficient' (validation/known.py)")
+def test_known_sionna_hard_polarisation_matches_exact_half_plane(quick_report):
+    _, summary = quick_report
+    err = summary["lines"]["half_plane"]["errors"]["Sionna RT (hard)"]
+    assert err["max_db"] < 1.0
+
+
+@pytest.mark.xfail(strict=True, reason="known disagreement 'reflection-boundary-jump' (validation/known.py)")
+def test_known_sionna_soft_polarisation_matches_exact_half_plane(quick_report):
+    _, summary = quick_report
+    err = summary["lines"]["half_plane"]["errors"]["Sionna RT (soft)"]
+    assert err["max_db"] < 1.0
+
+
+@pytest.mark.xfail(strict=True, reason="known disagreement 'hard-polarisation-coefficient' (validation/known.py)")
+def test_known_textbook_utd_equals_sionna_for_diffraction(quick_report):
+    _, summary = quick_report
+    worst = 0.0
+    for c in summary["cases"]:
+        for r in c["polarizations"].values():
+            for v in r["textbook_diffraction_gain_diff_db"].values():
+                if v["max"] is not None:
+                    worst = max(worst, v["max"])
+    assert worst < 0.5
+
+
+def test_compat_mode_reproduces_sionna_on_the_half_plane_line(quick_report):
+    # on a wedge lit on both faces Sionna's 0-face is whichever face its sampler hit, so its
+    # coefficient is not a function of the geometry (validation/known.py); a screen has one face
+    _, summary = quick_report
+    for name, line in [("half_plane", summary["lines"]["half_plane"])]:
+        for pol in ("soft", "hard"):
+            sn = line["errors"][f"Sionna RT ({pol})"]
+            cp = line["errors"][f"wavepaths compat=sionna ({pol})"]
+            assert abs(sn["median_db"] - cp["median_db"]) < 0.1, (name, pol)
