@@ -93,7 +93,8 @@ def main() -> None:
     fig.savefig(png, dpi=120)
     diff = got - itu
     print(f"{cmap.num_cells} cells in {cmap.elapsed_s:.1f} s; behind the hill at z = {rx[0, 2]:.1f} m, "
-          f"wavepaths - ITU knife edge: median {np.median(diff):+.2f} dB, range {diff.min():+.2f} .. {diff.max():+.2f} dB")
+          f"wavepaths - ITU knife edge: median {np.median(diff):+.2f} dB, "
+          f"range {diff.min():+.2f} .. {diff.max():+.2f} dB")
     print(f"wrote {png} and {npz}")
 
 

@@ -53,7 +53,7 @@ def main() -> None:
 
     lo, hi = color_range(np.concatenate([m.path_gain_db().ravel() for m in maps.values()]), 50.0)
     fig = Figure(figsize=(13, 4.6), layout="constrained")
-    for ax, (title, cmap) in zip(fig.subplots(1, 2), maps.items()):
+    for ax, (title, cmap) in zip(fig.subplots(1, 2), maps.items(), strict=True):
         plot_coverage(cmap, ax=ax, scene=scene, vmin=lo, vmax=hi, colormap="magma", title=title)
     fig.suptitle(f"back wall lit through the shutter, {args.frequency / 1e9:g} GHz, path gain [dB]")
     png = os.path.join(args.out, "shutter_coverage.png")

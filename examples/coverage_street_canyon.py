@@ -56,14 +56,14 @@ def main() -> None:
     npz = cmap.save(os.path.join(args.out, "street_canyon_coverage.npz"))
 
     fig = Figure(figsize=(9, 10), layout="constrained")
-    for ax, q in zip(fig.subplots(3, 1), ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m")):
+    for ax, q in zip(fig.subplots(3, 1), ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m"), strict=True):
         plot_coverage(cmap, q, ax=ax, scene=scene)
     fig.savefig(os.path.join(args.out, "street_canyon_coverage.png"), dpi=120)
 
     # the mechanisms on one colour scale
     lo, hi = color_range(cmap.path_gain_db(coherent=False))
     fig = Figure(figsize=(9, 10), layout="constrained")
-    for ax, q in zip(fig.subplots(3, 1), ("los_gain_db", "reflection_gain_db", "diffraction_gain_db")):
+    for ax, q in zip(fig.subplots(3, 1), ("los_gain_db", "reflection_gain_db", "diffraction_gain_db"), strict=True):
         plot_coverage(cmap, q, ax=ax, scene=scene, vmin=lo, vmax=hi)
     fig.savefig(os.path.join(args.out, "street_canyon_mechanisms.png"), dpi=120)
 

@@ -146,7 +146,8 @@ def test_inside_test_is_robust_on_edges_diagonals_and_open_bases():
         (x0, y0, z0), (x1, y1, z1) = lo, hi
         v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
                       [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
-        quads = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)] + ([(0, 3, 2, 1)] if bottom else [])
+        quads = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+        quads += [(0, 3, 2, 1)] if bottom else []
         return v, np.array([t for a, b, c, d in quads for t in ([a, b, c], [a, c, d])])
 
     va, ta = box_arrays((0, 0, 0), (4, 4, 6), True)

@@ -41,7 +41,7 @@ def assert_same_map(a, b):
 
 def test_scene_and_context_pickle_and_solve_the_same_tile(canyon, grid):
     ctx = build_tx_context(canyon, np.array([[-60.0, 0, 10]]), OPTIONS)
-    canyon.raycaster  # the Embree handle must not travel
+    assert canyon.raycaster is not None  # built here: the Embree handle must not travel
     scene2, ctx2 = pickle.loads(pickle.dumps((canyon, ctx)))
     rx = grid.cell_centers().reshape(-1, 3)[:12]
     rx = rx[(np.abs(rx[:, 1]) < 10)]

@@ -164,3 +164,60 @@ def test_total_field_is_continuous_across_wedge_boundaries():
                                 if p.max_depth else p, c).path_gain_db()[0]
             assert abs(go[0] - go[1]) > 3
     del cfg
+
+
+def test_coherence_matrix_form_equals_jones_and_handles_unpolarised_sources():
+    from wavepaths.em.polarization import coherence_from_jones, unpolarized_coherence
+    from wavepaths.fields.coherence import received_power_gain
+
+    s = load_scene("street_canyon")
+    p = trace(s, [[-30.0, 3.0, 6.0]], [[35.0, -4.0, 1.5]], TraceOptions(max_reflections=2, diffraction_reflections=1))
+    assert (p.interactions == 2).any() and (p.interactions == 1).any()
+    gains = {}
+    for tx_pol in ("V", "H"):
+        for rx_pol in ("V", "H"):
+            c = FieldConfig(2e9, tx_antenna=Antenna("iso", tx_pol), rx_antenna=Antenna("iso", rx_pol))
+            gains[tx_pol, rx_pol] = np.abs(compute_fields(s, p, c).a) ** 2
+    cfg = FieldConfig(2e9)
+    for tx_pol, e in (("V", np.array([1.0, 0.0])), ("H", np.array([0.0, 1.0]))):
+        for rx_pol in ("V", "H"):
+            g = received_power_gain(s, p, cfg, coherence_from_jones(e), Antenna("iso", rx_pol))
+            np.testing.assert_allclose(g, gains[tx_pol, rx_pol], rtol=1e-10, atol=1e-30)
+    # an unpolarised source delivers the mean of the two orthogonal polarisations
+    for rx_pol in ("V", "H"):
+        g = received_power_gain(s, p, cfg, unpolarized_coherence(), Antenna("iso", rx_pol))
+        np.testing.assert_allclose(g, 0.5 * (gains["V", rx_pol] + gains["H", rx_pol]), rtol=1e-10, atol=1e-30)
+
+
+def test_wide_screen_reproduces_itu_p526_knife_edge_loss():
+    from wavepaths.exact.knife_edge import fresnel_nu, knife_edge_loss_db
+
+    s = load_scene("half_plane")  # 100 m x 50 m metal screen in y = 0, top edge on the x axis
+    f = 3.5e9
+    lam = speed_of_light / f
+    d = 1000 * lam
+    nus = np.linspace(-1, 3, 9)
+    h = nus * np.sqrt(lam * d) / 2  # edge height above the tx-rx line, d1 = d2 = d
+    tx = np.stack([np.zeros_like(h), np.full_like(h, -d), -h], axis=1)
+    rx = np.stack([np.zeros_like(h), np.full_like(h, d), -h], axis=1)
+    np.testing.assert_allclose(fresnel_nu(h, d, d, lam), nus, atol=1e-12)
+    dih = s.dihedra
+    top_edge = int(np.nonzero((np.abs(dih.direction[:, 0]) > 0.99) & (np.abs(dih.origin[:, 2]) < 1e-9))[0][0])
+    loss = {}
+    for pol in ("H", "V"):  # E along the edge (soft), E across it (hard)
+        c = FieldConfig(f, tx_antenna=Antenna("iso", pol), rx_antenna=Antenna("iso", pol))
+        out = []
+        for i in range(len(nus)):
+            p = trace(s, tx[i : i + 1], rx[i : i + 1], TraceOptions(max_reflections=0, diffraction_reflections=0))
+            top = (p.depth == 0) | (p.primitive[:, 0] == top_edge)  # line of sight and the top edge only
+            g = compute_fields(s, p.select(top), c).path_gain_db()[0, 0]
+            out.append(-(g + 20 * np.log10(4 * np.pi * 2 * d / lam)))  # loss relative to free space
+        loss[pol] = np.array(out)
+    j = knife_edge_loss_db(nus)
+    # a perfectly conducting screen brackets the absorbing-screen J(nu); soft and hard within 0.5 dB of it
+    # and their mean within 0.1 dB (ITU-R P.526 §4.1; reference values in diffraction-physics.md §4)
+    np.testing.assert_allclose(loss["H"], j, atol=0.5)
+    np.testing.assert_allclose(loss["V"], j, atol=0.5)
+    np.testing.assert_allclose(0.5 * (loss["H"] + loss["V"]), j, atol=0.1)
+    zero = int(np.argmin(np.abs(nus)))
+    assert 0.5 * (loss["H"][zero] + loss["V"][zero]) == pytest.approx(6.02, abs=0.05)  # nu = 0: the edge halves the field

@@ -88,7 +88,9 @@ class PlanarGrid:
         size = _finite_vector("size", _pair(self.size), (2,))
         cell = _finite_vector("cell_size", _pair(self.cell_size), (2,))
         if (size <= 0).any():
-            raise WavepathsError(f"`size` must be positive in both directions (an empty grid otherwise), got {size.tolist()}")
+            raise WavepathsError(
+                f"`size` must be positive in both directions (an empty grid otherwise), got {size.tolist()}"
+            )
         if (cell <= 0).any():
             raise WavepathsError(f"`cell_size` must be positive, got {cell.tolist()}")
         ori = _finite_vector("orientation", self.orientation, (3,))

@@ -5,7 +5,8 @@ labelled and offset like it (a horizontal grid shows world ``x``, ``y``; the ver
 wall of the shutter example shows ``x``, ``z``). The scene is drawn as the lines where
 its triangles cut the grid's plane (building walls at the receiver height), cells inside
 solid objects are light grey, cells no path reaches dark grey (the colour bar's "under"
-triangle; values merely below the colour range take its lowest colour), and each transmitter is a red star at its projection on the plane.
+triangle; values merely below the colour range take its lowest colour), and each
+transmitter is a red star at its projection on the plane.
 """
 
 from __future__ import annotations

@@ -113,21 +113,52 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)
 
 
-def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarray, chunk: int = 2_000_000):
-    """Pairs (edge, polygon, side) where the edge runs inside a polygon not incident to it.
+def _grid_pairs(lo: np.ndarray, hi: np.ndarray, points: np.ndarray, cells_per_axis: int = 256):
+    """Candidate (point, box) pairs: points falling in a grid cell that the box overlaps.
 
-    Returns arrays ``edge``, ``polygon`` and ``sign`` (+1/-1): the polygon extends from
-    the edge in direction ``sign * (n_polygon x w)``.
+    A uniform 2-D grid over the two widest axes; each box is registered in every cell its
+    (padded) footprint overlaps, each point looks up its own cell. Returns two index arrays.
+    """
+    span = np.maximum(hi.max(axis=0) - lo.min(axis=0), 1e-12)
+    ax = np.argsort(span)[::-1][:2]
+    origin = lo.min(axis=0)[ax]
+    size = span[ax].max() / cells_per_axis
+    nx, ny = (np.ceil(span[ax] / size).astype(int) + 1).tolist()
+    b0 = np.clip(np.floor((lo[:, ax] - origin) / size).astype(np.int64), 0, [nx - 1, ny - 1])
+    b1 = np.clip(np.floor((hi[:, ax] - origin) / size).astype(np.int64), 0, [nx - 1, ny - 1])
+    cx = b1[:, 0] - b0[:, 0] + 1
+    cy = b1[:, 1] - b0[:, 1] + 1
+    count = cx * cy
+    box = np.repeat(np.arange(len(lo)), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    gx = b0[box, 0] + k % cx[box]
+    gy = b0[box, 1] + k // cx[box]
+    cell = gx * ny + gy
+    order = np.argsort(cell, kind="stable")
+    cell, box = cell[order], box[order]
+    ptr = np.searchsorted(cell, np.arange(nx * ny + 1))
+    pc = np.clip(np.floor((points[:, ax] - origin) / size).astype(np.int64), 0, [nx - 1, ny - 1])
+    qcell = pc[:, 0] * ny + pc[:, 1]
+    n = ptr[qcell + 1] - ptr[qcell]
+    point = np.repeat(np.arange(len(points)), n)
+    j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    return point, box[ptr[qcell][point] + j]
+
+
+def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarray):
+    """Pairs (edge, polygon) where the edge lies in the plane and box of a polygon.
+
+    Candidates come from a uniform grid over the polygons' bounding boxes (cost ~ edges x
+    polygons per cell, not edges x polygons); the plane test then keeps edges whose two
+    end points lie in the polygon's plane.
     """
     tol = scene.length_tolerance(scene.tolerances.plane_distance)
     n = scene.polygon_normal
     d = scene.polygon_offset
-    num_e = len(edge_a)
     p = len(n)
-    if num_e == 0 or p == 0:
+    if len(edge_a) == 0 or p == 0:
         z = np.zeros(0, dtype=np.int64)
-        return z, z, z
-    # polygon bounding boxes prefilter the (edge, polygon) pairs
+        return z, z
     tri_poly = scene.triangle_polygon
     corners = scene.vertices[scene.triangles]
     lo = np.full((p, 3), np.inf)
@@ -137,21 +168,13 @@ def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarra
     lo -= tol
     hi += tol
     mid = 0.5 * (edge_a + edge_b)
-    found_e, found_p = [], []
-    step = max(1, chunk // max(p, 1))
-    for s in range(0, num_e, step):
-        m = mid[s : s + step]
-        inside_box = np.all((m[:, None, :] >= lo[None]) & (m[:, None, :] <= hi[None]), axis=2)
-        ei, pi = np.nonzero(inside_box)
-        ei = ei + s
-        da = np.abs(np.einsum("ij,ij->i", edge_a[ei], n[pi]) - d[pi])
-        db = np.abs(np.einsum("ij,ij->i", edge_b[ei], n[pi]) - d[pi])
-        ok = (da <= tol) & (db <= tol)
-        found_e.append(ei[ok])
-        found_p.append(pi[ok])
-    e = np.concatenate(found_e)
-    pol = np.concatenate(found_p)
-    return e, pol
+    ei, pi = _grid_pairs(lo, hi, mid)
+    inside_box = np.all((mid[ei] >= lo[pi]) & (mid[ei] <= hi[pi]), axis=1)
+    ei, pi = ei[inside_box], pi[inside_box]
+    da = np.abs(np.einsum("ij,ij->i", edge_a[ei], n[pi]) - d[pi])
+    db = np.abs(np.einsum("ij,ij->i", edge_b[ei], n[pi]) - d[pi])
+    ok = (da <= tol) & (db <= tol)
+    return ei[ok], pi[ok]
 
 
 def build_dihedra(scene: "Scene") -> Dihedra:
