@@ -91,18 +91,11 @@ def reflecting_polygons(scene: "Scene", skip_absorbers: bool) -> np.ndarray:
     return keep
 
 
-def one_sided_signs(scene: "Scene", sources: np.ndarray) -> np.ndarray:
-    """(p,) float: outward sign of polygons of closed objects that contain none of ``sources``.
-
-    Such a polygon reflects only a wave whose apparent source lies on its outer side;
-    0 marks polygons that reflect on both sides (open objects, or a closed object with a
-    source inside it).
-    """
-    sign = scene.outward_sign.copy()
-    if (sign != 0).any() and len(sources):
-        inside = points_inside_closed(scene, sources).any(axis=0)
-        sign[inside[scene.polygon_object]] = 0.0
-    return sign
+def source_inside_objects(scene: "Scene", sources: np.ndarray) -> np.ndarray:
+    """(s, objects) bool: which closed objects each source lies in (one-sided culling is off there)."""
+    if not (scene.outward_sign != 0).any() or len(sources) == 0:
+        return np.zeros((len(sources), len(scene.object_names)), dtype=bool)
+    return points_inside_closed(scene, sources)
 
 
 def build_image_levels(
@@ -134,7 +127,8 @@ def build_image_levels(
     d = scene.polygon_offset
     centre, radius = polygon_spheres(scene)
     mirrors = np.nonzero(reflecting_polygons(scene, skip_absorbers))[0]
-    outward = one_sided_signs(scene, sources)
+    outward = scene.outward_sign
+    inside = source_inside_objects(scene, sources)  # decided per source, never for the whole batch
     for k in range(1, max_order + 1):
         lv = levels[-1]
         c = len(lv)
@@ -149,7 +143,8 @@ def build_image_levels(
         parent = lv.last[chain]
         side = np.einsum("ij,ij->i", parent, n[q]) - d[q]
         keep = np.abs(side) > tol
-        keep &= (outward[q] == 0) | (outward[q] * side > 0)  # closed objects: from outside only
+        two_sided = (outward[q] == 0) | inside[lv.source[chain], scene.polygon_object[q]]
+        keep &= two_sided | (outward[q] * side > 0)  # closed objects: from outside only
         if k >= 2:
             p = lv.polygons[chain, -1]
             before = lv.images[chain, -2]  # the image the wave came from before reflecting on p

@@ -116,12 +116,58 @@ def reflection_tile(
     return out
 
 
-def _join(ctx: TxContext, a: int, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.ndarray):
+    """The (source, dihedron) pairs whose Keller cones can reach a sphere around ``targets``.
+
+    Along an edge from A (t = 0) to B (t = L), a receiver R is reached at some point iff
+    ``w.(R - A)/|R - A| >= cos beta_A`` and ``w.(R - B)/|R - B| <= cos beta_B`` with
+    ``cos beta_X = w.(X - S)/|X - S|`` (the diffracted cone's opening equals the incident
+    angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
+    with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
+    """
+    from .context import DiffractionSources
+
+    if len(src.chain) == 0 or len(targets) == 0:
+        return src
+    c = targets.mean(axis=0)
+    r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
+    d = src.dihedron
+    w = dihedra.direction[d]
+    A = dihedra.origin[d]
+    B = A + dihedra.length[d][:, None] * w
+
+    def cos_to(x_from, x_to):
+        v = x_to - x_from
+        return np.einsum("ij,ij->i", v, w) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+
+    cos_a = cos_to(sources, A)
+    cos_b = cos_to(sources, B)
+
+    def angle_range(X):
+        v = c - X
+        dist = np.linalg.norm(v, axis=1)
+        theta = np.arccos(np.clip(np.einsum("ij,ij->i", v, w) / np.maximum(dist, 1e-300), -1, 1))
+        delta = np.where(dist > r, np.arcsin(np.clip(r / np.maximum(dist, 1e-300), 0, 1)), np.pi)
+        return theta, delta
+
+    th_a, de_a = angle_range(A)
+    th_b, de_b = angle_range(B)
+    slack = 1e-9
+    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) >= cos_a - slack
+    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) <= cos_b + slack
+    keep = reach_a & reach_b
+    if keep.all():
+        return src
+    chain, dih, key = src.chain[keep], src.dihedron[keep], src.key[keep]
+    uk, start, count = np.unique(key, return_index=True, return_counts=True)
+    return DiffractionSources(chain, dih, key, uk, start.astype(np.int64), count.astype(np.int64))
+
+
+def _join(src, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each receiver-side key, all transmitter-side sources with the same key.
 
     Returns the receiver-side row and the transmitter-side row of every match.
     """
-    src = ctx.diffraction_sources[a]
     pos = np.searchsorted(src.unique_keys, keys)
     pos = np.clip(pos, 0, max(len(src.unique_keys) - 1, 0))
     hit = len(src.unique_keys) > 0
@@ -173,14 +219,21 @@ def diffraction_tile(
     dihedra = scene.dihedra
     tx_lv = ctx.levels[a]
     rx_lv = rx_levels[b]
-    diffr = ctx.diffracting
     tag = f"diffraction_{a}r_{b}r"
     out: list[PathBatch] = []
-    if len(diffr) == 0 or len(rx_lv) == 0 or len(ctx.diffraction_sources[a].chain) == 0:
+    if len(rx_lv) == 0 or len(ctx.diffraction_sources[a].chain) == 0:
         return out
-    step = max(1, CANDIDATE_BUDGET // max(len(diffr), 1))
+    src_all = ctx.diffraction_sources[a]
+    step = max(1, CANDIDATE_BUDGET // max(len(np.unique(src_all.dihedron)), 1))
     for s in range(0, len(rx_lv), step):
         e_rows = np.arange(s, min(len(rx_lv), s + step))
+        # Keller-cone culling for this chunk of receivers (or receiver images): keep the
+        # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
+        src = _cull_sources_by_keller_cone(dihedra, src_all, tx_lv.last[src_all.chain], rx_lv.last[e_rows])
+        stats[f"{tag}_source_pairs_culled_keller_cone"] += len(src_all.chain) - len(src.chain)
+        diffr = np.unique(src.dihedron)
+        if len(diffr) == 0:
+            continue
         e = np.repeat(e_rows, len(diffr))
         d = np.tile(diffr, len(e_rows))
         sec, width = sector_of(ctx.sectors, d, rx_lv.last[e], dihedra.origin[d])
@@ -188,8 +241,7 @@ def diffraction_tile(
         stats[f"{tag}_receiver_pairs"] += len(e)
         stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~keep).sum())
         e, d, sec = e[keep], d[keep], sec[keep]
-        rows, src_rows = _join(ctx, a, d * ctx.key_stride + sec)
-        src = ctx.diffraction_sources[a]
+        rows, src_rows = _join(src, d * ctx.key_stride + sec)
         e, d = e[rows], d[rows]
         c = src.chain[src_rows]
         stats[f"{tag}_candidates"] += len(e)
