@@ -107,3 +107,15 @@ def test_compat_mode_reproduces_sionna_on_the_half_plane_line(quick_report):
             sn = line["errors"][f"Sionna RT ({pol})"]
             cp = line["errors"][f"wavepaths compat=sionna ({pol})"]
             assert abs(sn["median_db"] - cp["median_db"]) < 0.1, (name, pol)
+
+
+def test_coverage_maps_of_both_engines_agree_on_the_street_canyon(quick_report):
+    _, summary = quick_report
+    cov = summary["coverage"]
+    no_diff = cov["runs"]["no_diffraction"]
+    assert no_diff["cells_compared"] > 200
+    # same quantity (power sum of LOS + reflections): only Sionna's sampling noise and cell averaging differ
+    assert abs(no_diff["median_db"]) < 0.5
+    with_diff = cov["runs"]["diffraction"]
+    assert with_diff["cells_compared"] >= no_diff["cells_compared"]  # diffraction lights the shadowed cells
+    assert abs(with_diff["median_db"]) < 1.0

@@ -342,6 +342,21 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
                      "<th>max complex error</th></tr>" + "".join(
                          f"<tr><td>{e(k)}</td><td>{_fmt(v['max_db'])}</td><td>{_fmt(v['median_db'])}</td>"
                          f"<td>{_fmt(v['max_complex_error'])}</td></tr>" for k, v in line["errors"].items()) + "</table>")
+    cov = summary.get("coverage")
+    if cov:
+        parts.append("<h2>Coverage maps</h2><p>Sionna RT's <code>RadioMapSolver</code> (ray shooting, cell-averaged, "
+                     "power sum) and wavepaths' exact paths at the cell centres (power sum), same scene "
+                     f"(<code>{e(str(cov['scene']))}</code>), transmitter {cov['tx']}, {cov['cell_m']} m cells at "
+                     f"z = {cov['center'][2]} m, depth {cov['max_depth']}. Statistics over cells outside buildings "
+                     f"where both maps exceed {cov['noise_floor_db']} dB.</p>")
+        parts.append(f"<img src='data:image/png;base64,{figures['coverage']}'>")
+        parts.append("<table><tr><th>run</th><th>cells compared</th><th>median diff [dB]</th><th>mean [dB]</th>"
+                     "<th>std [dB]</th><th>95% |diff| [dB]</th><th>cells only wavepaths reaches</th>"
+                     "<th>wavepaths [s]</th><th>Sionna [s] (after warm-up)</th></tr>" + "".join(
+                         f"<tr><td>{e(k)}</td><td>{r['cells_compared']}</td><td>{_fmt(r['median_db'])}</td>"
+                         f"<td>{_fmt(r['mean_db'])}</td><td>{_fmt(r['std_db'])}</td><td>{_fmt(r['p95_abs_db'])}</td>"
+                         f"<td>{r['cells_only_wavepaths']}</td><td>{_fmt(r['wavepaths_time_s'])}</td>"
+                         f"<td>{_fmt(r['sionna_time_s'])}</td></tr>" for k, r in cov["runs"].items()) + "</table>")
     parts.append("<h2>Known disagreements</h2><table><tr><th>what</th><th>why</th><th>matches the exact solution</th></tr>"
                  + "".join(f"<tr><td style='text-align:left'>{e(k['what'])}</td><td style='text-align:left'>{e(k['reason'])}</td>"
                            f"<td>{e(k['who_matches_exact'])}</td></tr>" for k in KNOWN_DISAGREEMENTS) + "</table>")
@@ -381,7 +396,7 @@ def run_validation(out_dir: str, quick: bool = False, progress=None) -> dict:
     os.makedirs(out_dir, exist_ok=True)
     cases = [c for c in default_cases() if c.quick or not quick]
     results, figures = [], {}
-    steps = len(cases) + 2
+    steps = len(cases) + 3
     for i, case in enumerate(cases):
         if progress:
             progress(i, steps, case.name)
@@ -397,6 +412,17 @@ def run_validation(out_dir: str, quick: bool = False, progress=None) -> dict:
                        "boundaries_deg": line.boundaries_deg, "k_rho": line.k_rho}
         figures["line_" + name] = _line_figure(line)
     if progress:
+        progress(steps, steps, "coverage maps")
+    from .coverage_compare import compare_coverage, coverage_figure
+    from .sionna_runner import builtin_scene_path
+
+    cov = compare_coverage(builtin_scene_path("simple_street_canyon"), [-40.0, 0.0, 10.0], (0.0, 0.0, 1.5),
+                           (160.0, 80.0), 4.0 if quick else 2.0, 2)
+    figures["coverage"] = coverage_figure(cov)
+    coverage_summary = {k: v for k, v in cov.items() if k != "runs"}
+    coverage_summary["runs"] = {name: {k: v for k, v in r.items() if not isinstance(v, np.ndarray)}
+                                for name, r in cov["runs"].items()}
+    if progress:
         progress(steps, steps, "report")
     summary = {
         "generated": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -405,6 +431,7 @@ def run_validation(out_dir: str, quick: bool = False, progress=None) -> dict:
         "tolerances": TOLERANCES,
         "cases": results,
         "lines": lines,
+        "coverage": coverage_summary,
         "known_disagreements": KNOWN_DISAGREEMENTS,
         "passed": all(r["passed"] for r in results),
     }
