@@ -52,6 +52,7 @@ def _trace_options(args):
         diffraction=not args.no_diffraction,
         diffraction_reflections=args.diffraction_reflections,
         lit_region=not args.no_lit_region,
+        prune_db=args.prune_db,
     )
 
 
@@ -121,6 +122,8 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
                    help="reflections combined with the diffraction, before and after (default 1)")
     p.add_argument("--no-lit-region", action="store_true", help="diffraction only in the incident shadow")
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
+    p.add_argument("--prune-db", type=float, default=None,
+                   help="drop reflections at least this many dB below free space (bound in TraceOptions)")
 
 
 def _add_field_flags(p: argparse.ArgumentParser) -> None:

@@ -187,3 +187,29 @@ def test_transmitter_inside_a_closed_room_warns_and_finds_the_inner_reflections(
     images = [tx[0] * [-1, 1, 1], tx[0] * [1, -1, 1], tx[0] * [1, 1, -1],
               tx[0] * [-1, 1, 1] + [20, 0, 0], tx[0] * [1, -1, 1] + [0, 16, 0], tx[0] * [1, 1, -1] + [0, 0, 8]]
     np.testing.assert_allclose(np.sort(p.lengths[p.depth == 1]), np.sort([np.linalg.norm(rx[0] - i) for i in images]))
+
+
+@pytest.mark.parametrize("prune_db", [6.0, 12.0])
+def test_prune_tolerance_drops_only_weak_reflections_and_respects_its_bound(prune_db):
+    from wavepaths.fields import FieldConfig, compute_fields
+
+    s = load_scene("street_canyon")
+    tx = np.array([[-60.0, 0.0, 10.0]])
+    rx = np.stack([np.linspace(-80, 80, 17), np.full(17, 2.0), np.full(17, 1.5)], axis=1)
+    full = trace(s, tx, rx, TraceOptions(max_reflections=3, diffraction=False))
+    pruned = trace(s, tx, rx, TraceOptions(max_reflections=3, diffraction=False, prune_db=prune_db))
+    assert 0 < len(pruned) < len(full)
+    cfg = FieldConfig(3.5e9)
+    fa, pa = compute_fields(s, full, cfg), compute_fields(s, pruned, cfg)
+    key = lambda p, i: (int(p.rx_index[i]), tuple(p.primitive[i, : p.depth[i]].tolist()))
+    kept = {key(pruned, i) for i in range(len(pruned))}
+    dropped = [i for i in range(len(full)) if key(full, i) not in kept]
+    assert len(dropped) == len(full) - len(pruned) <= pruned.stats["pruned_paths_upper_bound"]
+    fs = cfg.wavelength / (4 * np.pi * np.linalg.norm(rx - tx, axis=1))
+    for i in dropped:  # each dropped path is at least prune_db below free space
+        assert abs(fa.a[i]) <= 10 ** (-prune_db / 20) * fs[full.rx_index[i]] * (1 + 1e-12)
+    # the stated bound on the power-sum change, relative to free space, per receiver
+    p_full = fa.path_gain(coherent=False)[0] / fs**2
+    p_kept = pa.path_gain(coherent=False)[0] / fs**2
+    n_drop = np.bincount(full.rx_index[dropped], minlength=len(rx))
+    assert (p_full - p_kept <= n_drop * 10 ** (-prune_db / 10) * (1 + 1e-9)).all()

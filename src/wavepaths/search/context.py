@@ -78,13 +78,14 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
         max_order = max(max_order, options.diffraction_reflections)
     levels = build_image_levels(scene, tx, max_order, options.skip_absorbers)
     stats = {f"images_order_{k}": len(lv) for k, lv in enumerate(levels)}
-    dihedra = scene.dihedra
-    diffracting = np.nonzero(dihedra.diffracting)[0]
+    # a scene traced without diffraction never builds its dihedra
+    diffracting = np.nonzero(scene.dihedra.diffracting)[0] if options.diffraction else np.zeros(0, np.int64)
     stats["dihedra_diffracting"] = int(len(diffracting))
     sources: list[DiffractionSources] = []
     sectors = None
     stride = 1
     if options.diffraction and len(diffracting):
+        dihedra = scene.dihedra
         sectors = sector_table(dihedra)
         stride = int(sectors.angles.shape[1]) + 1
         ang_tol = 1e-12

@@ -32,6 +32,16 @@ class TraceOptions:
         Never reflect off polygons whose material is an absorber.
     rx_batch : int
         Receivers processed per vectorised tile (memory vs. overhead).
+    prune_db : float or None
+        Drop reflected paths whose amplitude cannot exceed the free-space amplitude at
+        the receiver's direct distance minus ``prune_db`` dB. The bound: a passive
+        reflection has ``|Gamma| <= 1`` and the unfolded length of a chain is at least
+        the distance from the receiver to its last image, so a chain with
+        ``|rx - I_k| > 10^(prune_db / 20) |rx - tx|`` carries at most ``-prune_db`` dB
+        relative to free space (isotropic antennas; with directive antennas add their
+        peak gains). The dropped paths are counted in ``stats`` (``pruned_paths``); their
+        total power changes the power-sum path gain relative to free space by at most
+        ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
     """
 
     los: bool = True
@@ -41,8 +51,11 @@ class TraceOptions:
     lit_region: bool = True
     skip_absorbers: bool = True
     rx_batch: int = 256
+    prune_db: float | None = None
 
     def __post_init__(self) -> None:
+        if self.prune_db is not None and not self.prune_db > 0:
+            raise WavepathsError(f"`prune_db` must be positive or None, got {self.prune_db}")
         if not 0 <= self.max_reflections <= 6:
             raise WavepathsError(f"`max_reflections` must be in 0..6, got {self.max_reflections}")
         if not 0 <= self.diffraction_reflections <= 4:

@@ -96,6 +96,17 @@ def reflection_tile(
         ri = np.repeat(r, c)
         ci = np.tile(np.arange(c), len(r))
         stats[f"{tag}_candidates"] += len(ri)
+        if ctx.options.prune_db is not None:
+            # |a| <= lambda / (4 pi |rx - I_k|) for |Gamma| <= 1: drop chains below the tolerance
+            direct = np.linalg.norm(rx[ri] - ctx.tx[lv.source[ci]], axis=1)
+            unfolded = np.linalg.norm(rx[ri] - lv.images[ci, -1], axis=1)
+            weak = unfolded > 10 ** (ctx.options.prune_db / 20) * direct
+            if weak.any():
+                # count only those that would have been paths, so the stated bound uses the true number
+                okw, _, _ = backtrace(scene, rx[ri[weak]], lv, ci[weak])
+                stats["pruned_paths_upper_bound"] += len(okw)
+                stats[f"{tag}_pruned_candidates"] += int(weak.sum())
+            ri, ci = ri[~weak], ci[~weak]
         ok, pts, rej = backtrace(scene, rx[ri], lv, ci)
         stats[f"{tag}_rejected_segment"] += rej["segment"]
         stats[f"{tag}_rejected_outside_polygon"] += rej["outside_polygon"]
