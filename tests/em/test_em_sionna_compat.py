@@ -12,7 +12,7 @@ import pytest
 from scipy.constants import speed_of_light
 
 from wavepaths.em.fresnel import slab_coefficients
-from wavepaths.em.utd import sionna_compat_coefficients
+from wavepaths.em.sionna_compat import sionna_compat_coefficients
 
 pytestmark = pytest.mark.sionna
 

@@ -34,7 +34,8 @@ import numpy as np
 from ..em.antennas import antenna_field
 from ..em.fresnel import reflection_coefficients
 from ..em.polarization import spherical_unit_vectors
-from ..em.utd import diffraction_jones, luebbers_face_coefficients, sionna_face_coefficients
+from ..em.sionna_compat import sionna_face_coefficients
+from ..em.utd import diffraction_jones, luebbers_face_coefficients
 from ..search.paths import InteractionType, Paths
 from .config import FieldConfig
 
