@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import jv
 
-from wavepaths.em.utd import keller_coefficients, kp_coefficients, sionna_compat_coefficients
+from wavepaths.em.sionna_compat import sionna_compat_coefficients
+from wavepaths.em.utd import keller_coefficients, kp_coefficients
 from wavepaths.errors import WavepathsError
 from wavepaths.exact.halfplane import Polarization, _sign_for
 
