@@ -88,34 +88,39 @@ def test_total_field_is_continuous_within_1e9_rad_of_a_boundary(name, tx, kind, 
     rx = np.array([rho * rotate_yz(b, s * DELTA) for s in (-1, 1)])
     for pol in ("V", "H"):
         t, p, f = total_field(scene, tx, rx, OPTS, pol)
-        # not vacuous: geometrical optics alone jumps here
-        go = per_receiver(p, f.a_phased, 2, go_mask(p))
-        assert abs(go[0] - go[1]) > 0.2 * abs(t).max(), (pol, go)
+        # not vacuous: the diffracted field alone jumps here (a boundary indeed)
+        dif = per_receiver(p, f.a_phased, 2, ~go_mask(p))
+        assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
         assert abs(t[0] - t[1]) <= CONTINUITY * abs(t).max(), (pol, t, abs(t[0] - t[1]) / abs(t).max())
 
 
 # Receivers placed exactly on a boundary with integer coordinates, so that the float64
 # offset of the boundary computes to exactly 0 (the UTD term is then the mean of its
-# one-sided limits and the search keeps or drops the GO path): the value must be the mean
-# of the two sides, i.e. continuous.
+# one-sided limits while the search keeps or drops the GO path). The value must be the
+# limit from both sides: the mean of the fields at +-1e-6 rad, which the smooth (C1) total
+# field reproduces to O((k rho delta)^2) ~ 4e-7; we allow 1e-5. (1e-6 rad keeps the
+# neighbours clear of the reflection-margin bug tested above.)
 EXACT = [
     ("half_plane", (0.0, -3.0, 4.0), (0.0, 6.0, -8.0)),  # incident shadow boundary
     ("half_plane", (0.0, -3.0, 4.0), (0.0, -6.0, -8.0)),  # reflection boundary of y = 0
     ("wedge", (0.0, -3.0, 4.0), (0.0, 6.0, -8.0)),  # incident shadow boundary
     ("wedge", (0.0, -3.0, 4.0), (0.0, 6.0, 8.0)),  # reflection boundary of z = 0
     ("wedge", (0.0, 4.0, -3.0), (0.0, 8.0, 6.0)),  # reflection boundary of y = 0
+    ("concrete_wedge", (0.0, -3.0, 4.0), (0.0, 6.0, -8.0)),
+    ("concrete_wedge", (0.0, 4.0, -3.0), (0.0, 8.0, 6.0)),
 ]
 
 
 @pytest.mark.parametrize("name, tx, rx", EXACT, ids=[f"{e[0]}-{i}" for i, e in enumerate(EXACT)])
-def test_total_field_exactly_on_a_boundary_is_the_mean_of_both_sides(name, tx, rx):
+def test_total_field_exactly_on_a_boundary_is_the_limit_from_both_sides(name, tx, rx):
     scene = SCENES[name]()
     tx, rx = np.array([tx]), np.array(rx)
-    pts = np.array([rotate_yz(rx, -DELTA), rx, rotate_yz(rx, DELTA)])
+    pts = np.array([rotate_yz(rx, -1e-6), rx, rotate_yz(rx, 1e-6)])
     for pol in ("V", "H"):
-        t, p, _ = total_field(scene, tx, pts, OPTS, pol)
-        assert abs(t[1] - 0.5 * (t[0] + t[2])) <= CONTINUITY * abs(t).max(), (pol, t)
-        assert abs(t[0] - t[2]) <= CONTINUITY * abs(t).max(), (pol, t)
+        t, p, f = total_field(scene, tx, pts, OPTS, pol)
+        assert abs(t[1] - 0.5 * (t[0] + t[2])) <= 1e-5 * abs(t).max(), (pol, t)
+        dif = per_receiver(p, f.a_phased, 3, ~go_mask(p))
+        assert abs(dif[0] - dif[2]) > 0.1 * abs(t).max()  # a boundary indeed
 
 
 @pytest.mark.parametrize("kind", ["shadow", pytest.param("reflection", marks=pytest.mark.xfail(strict=True, reason=B2))])
@@ -158,6 +163,6 @@ def test_shadow_boundary_of_a_reflected_ray_is_compensated_by_the_reflected_diff
     opts = TraceOptions(max_reflections=1, diffraction_reflections=1)
     for pol in ("V", "H"):
         t, p, f = total_field(s, tx, rx, opts, pol)
-        go = per_receiver(p, f.a_phased, 2, go_mask(p))
-        assert abs(go[0] - go[1]) > 0.1 * abs(t).max(), (pol, go)
+        dif = per_receiver(p, f.a_phased, 2, ~go_mask(p))
+        assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
         assert abs(t[0] - t[1]) <= CONTINUITY * abs(t).max(), (pol, t)

@@ -1,0 +1,300 @@
+"""Wedges at the ends of their range, and meshes that make geometry hard: n near 1
+(almost flat), n near 2 and n = 2, very short and very long edges, nearly parallel edges,
+sliver triangles."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths import TraceOptions, trace
+from wavepaths.exact.halfplane import halfplane_plane_wave
+from wavepaths.exact.wedge import wedge_plane_wave
+from wavepaths.scene import WavepathsWarning, build_scene
+from wavepaths.em.materials import PEC
+
+from ..conftest import quads_scene
+from ..search.brute_force import enumerate_paths
+from .helpers import DIFF, REFL, check_laws, config, halfplane_scalar_total, path_table, rotate_yz, top_edge, total_field
+
+OPTS = TraceOptions(max_reflections=1, diffraction_reflections=0)
+C0 = 299_792_458.0
+
+
+def tri_scene(vertices, triangles, objects=None):
+    v, t = np.asarray(vertices, float), np.asarray(triangles)
+    o = np.zeros(len(t), int) if objects is None else np.asarray(objects)
+    return build_scene(v, t, o, np.zeros(len(t), int), [f"o{i}" for i in range(o.max() + 1)], [PEC])
+
+
+def engine_keys(scene, tx, rx, **opts):
+    """{(kinds letters, primitives): length} for one pair; duplicates fail."""
+    p = trace(scene, tx[None], rx[None], TraceOptions(**opts))
+    out = {}
+    for i in range(len(p)):
+        d = int(p.depth[i])
+        key = (tuple("RD"[int(t) - 1] for t in p.interactions[i, :d]), tuple(int(x) for x in p.primitive[i, :d]))
+        assert key not in out, f"path found twice: {key}"
+        out[key] = p.lengths[i]
+    return out, p
+
+
+def assert_complete(scene, tx, rx, **opts):
+    """Same path set as the brute-force enumerator (no shared search code), same lengths."""
+    ref = enumerate_paths(scene, tx, rx, **opts)
+    got, p = engine_keys(scene, tx, rx, **opts)
+    assert set(got) == set(ref), (sorted(set(ref) - set(got)), sorted(set(got) - set(ref)))
+    for k in ref:
+        assert got[k] == pytest.approx(ref[k], rel=1e-9)
+    check_laws(scene, p)
+    return got, p
+
+
+# ---- n near 1 ----------------------------------------------------------------------------------
+ROOF_W = 20.0
+
+
+def roof(dn: float):
+    """Two 80 m x 20 m plates on the x axis bent by (n - 1) pi: exterior angle n pi on top."""
+    a = dn * np.pi
+    d = np.array([0, np.cos(a), -np.sin(a)]) * ROOF_W
+    qa = [[-40, -ROOF_W, 0], [40, -ROOF_W, 0], [40, 0, 0], [-40, 0, 0]]
+    qb = [[-40, 0, 0], [40, 0, 0], [40, d[1], d[2]], [-40, d[1], d[2]]]
+    return quads_scene([qa, qb], objects=[0, 0])
+
+
+@pytest.mark.parametrize("pol", ["V", "H"])
+@pytest.mark.parametrize("dn", [1e-4, 1e-5, 3.2e-6, 3.0e-6])
+def test_nearly_flat_wedge_tends_to_the_flat_plate(dn, pol):
+    """As n -> 1 the bent plate becomes the flat one, through the flat-edge threshold
+    (coplanar_angle = 1e-5 rad, i.e. n - 1 = 3.18e-6, where the bend stops being a dihedron).
+    Bound: every path of the bent plate differs from the flat one by a phase of at most
+    ``k 2 W pi (n - 1)`` (plate width W) and the bend's own diffraction vanishes with n - 1, so
+    ``|T - T_flat| <= 2 pi k W (n - 1) sum |a|``."""
+    tx = np.array([[1.0, -6.0, 5.0]])
+    rx = np.array([[x, y, 3.0] for x in (-2.0, 3.0) for y in (-3.0, 2.0, 7.0)] + [[0.5, 8.0, 0.5]])
+    flat, pf, ff = total_field(roof(0.0), tx, rx, OPTS, pol)
+    s = roof(dn)
+    bent, p, f = total_field(s, tx, rx, OPTS, pol)
+    assert np.isfinite(f.a).all()
+    k = config().wavenumber
+    amp = np.zeros(len(rx))
+    np.add.at(amp, pf.rx_index, np.abs(ff.a))
+    bound = 2 * np.pi * k * ROOF_W * dn * amp
+    assert (np.abs(bent - flat) <= bound).all(), (np.abs(bent - flat) / bound)
+    # the bend itself diffracts (when it is a dihedron) only weakly
+    bend = [i for i in range(len(p)) if p.depth[i] == 1 and p.interactions[i, 0] == DIFF
+            and abs(s.dihedra.origin[p.primitive[i, 0], 1]) + abs(s.dihedra.direction[p.primitive[i, 0], 1]) < 1e-9
+            and abs(s.dihedra.origin[p.primitive[i, 0], 2]) < 1e-9]
+    los = np.abs(f.a[p.depth == 0]).max()
+    for i in bend:
+        assert abs(f.a[i]) <= 2 * np.pi * k * ROOF_W * dn * los
+
+
+# ---- n near 2 and n = 2 ------------------------------------------------------------------------
+B8 = (
+    "BUG: in a thin wedge (interior angle alpha), the hidden inner face lies alpha r behind the "
+    "front face at distance r from the edge; when alpha r < ray_offset (1e-6 of the diagonal) the "
+    "segment to a reflection point on the hidden face is shortened past the front face, so a "
+    "reflection *through* the front face is accepted (error ~ the whole reflected field)"
+)
+B9 = (
+    "BUG: a zero-thickness double-sided screen (the same quad twice with opposite orientations, "
+    "e.g. a thin wedge welded flat) is taken as a closed object with an arbitrary outward side "
+    "and reflects on one side only; as two objects, both copies are 'hidden contact faces' and "
+    "reflect on neither side (the missing reflection is the whole GO field)"
+)
+
+
+def thin_wedge(alpha: float, flip: bool = False):
+    """A screen y = 0, z < 0, and a second face at the interior angle ``alpha`` behind it."""
+    a = [[-50, 0, -50], [50, 0, -50], [50, 0, 0], [-50, 0, 0]]
+    d = np.array([0, -np.sin(alpha), -np.cos(alpha)]) * 50
+    b = [[-50, 0, 0], [50, 0, 0], [50, d[1], d[2]], [-50, d[1], d[2]]]
+    return quads_scene([a, b[::-1] if flip else b], objects=[0, 0])
+
+
+def double_screen(objects):
+    a = [[-50, 0, -50], [50, 0, -50], [50, 0, 0], [-50, 0, 0]]
+    return quads_scene([a, a[::-1]], objects=objects)
+
+
+N2_CASES = [
+    pytest.param(lambda: thin_wedge(1e-1), 1e-1, id="interior_0.1"),
+    pytest.param(lambda: thin_wedge(1e-2), 1e-2, id="interior_1e-2"),
+    pytest.param(lambda: thin_wedge(1e-3), 1e-3, id="interior_1e-3", marks=pytest.mark.xfail(strict=True, reason=B8)),
+    pytest.param(lambda: thin_wedge(1e-4), 1e-4, id="interior_1e-4", marks=pytest.mark.xfail(strict=True, reason=B8)),
+    pytest.param(lambda: thin_wedge(1e-6), 0.0, id="interior_1e-6_below_coplanar"),
+    pytest.param(lambda: thin_wedge(1e-8, flip=True), 0.0, id="interior_1e-8_welded_same_orientation"),
+    pytest.param(lambda: thin_wedge(1e-8), 0.0, id="interior_1e-8_welded_closed",
+                 marks=pytest.mark.xfail(strict=True, reason=B9)),
+    pytest.param(lambda: double_screen([0, 0]), 0.0, id="double_sided_one_object"),
+    pytest.param(lambda: double_screen([0, 1]), 0.0, id="double_sided_two_objects",
+                 marks=pytest.mark.xfail(strict=True, reason=B9)),
+]
+
+
+@pytest.mark.parametrize("make, alpha", N2_CASES)
+def test_wedges_near_n_2_match_the_exact_series(make, alpha):
+    """Exact reference: Macdonald's eigenfunction series for n = 2 - alpha / pi (the
+    half-plane's Sommerfeld solution for n = 2), plane wave from phi' = 60 deg (tx 2e4 m away),
+    receivers at k rho = 50 all around, including 0.5 deg from the boundaries. Tolerance 3e-3
+    of the unit incident field (UTD's asymptotic error at k rho = 50, as for the half-plane)."""
+    s = make()
+    freq = 3e9
+    k = 2 * np.pi * freq / C0
+    phi_p = np.deg2rad(60.0)
+
+    def u(phi):
+        return np.stack([np.zeros_like(phi), np.sin(phi), -np.cos(phi)], axis=-1)
+
+    tx = 2e4 * u(np.array([phi_p]))
+    phis = np.deg2rad(np.array([10, 30, 90, 119.5, 120.5, 150, 200, 239.5, 240.5, 300, 350]))
+    n = 2.0 - alpha / np.pi
+    for pol in ("soft", "hard"):
+        got = halfplane_scalar_total(s, tx, (50.0 / k) * u(phis), pol, freq, top_edge(s), OPTS)
+        ref = halfplane_plane_wave(50.0, phis, phi_p, pol) if alpha == 0 else wedge_plane_wave(50.0, phis, phi_p, n, pol)
+        np.testing.assert_allclose(got, ref, atol=3e-3, err_msg=pol)
+
+
+# ---- very short and very long edges --------------------------------------------------------------
+GROUND = [[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]]
+
+
+@pytest.mark.parametrize("w", [1e-2, 1e-3, 3e-4])
+def test_very_short_edges_diffract_exactly_once_each(w):
+    """A w x w plate standing in a 141 m scene (weld tolerance 1.4e-4 m: w = 3e-4 is two
+    tolerances). End points are placed so that the Keller point of each of the plate's four
+    edges falls inside it: the four diffractions are found, once each, on their cones, and
+    the whole path set equals the brute-force enumeration."""
+    plate = [[-w / 2, 0, 1], [w / 2, 0, 1], [w / 2, 0, 1 + w], [-w / 2, 0, 1 + w]]
+    s = quads_scene([GROUND, plate])
+    tx = np.array([0.0, -5.0, 1 + w / 2])
+    rx = np.array([0.0, 4.0, 1 + w / 2])
+    got, p = assert_complete(s, tx, rx, max_reflections=1, diffraction=True, diffraction_reflections=1)
+    short = {i for i in range(len(s.dihedra)) if s.dihedra.length[i] < 2 * w}
+    assert len(short) == 4
+    hits = [k[1][0] for k in got if k[0] == ("D",)]
+    assert sorted(h for h in hits if h in short) == sorted(short)
+
+
+def test_edges_shorter_than_the_weld_tolerance_are_reported():
+    w = 3e-5  # below the weld tolerance 1.4e-4 m of this scene: the plate's corners merge
+    plate = [[-w / 2, 0, 1], [w / 2, 0, 1], [w / 2, 0, 1 + w], [-w / 2, 0, 1 + w]]
+    with pytest.warns(WavepathsWarning, match="zero-area"):
+        quads_scene([GROUND, plate])
+
+
+@pytest.mark.parametrize("length", [1e4, 1e5])
+def test_very_long_edge_matches_sommerfeld_near_its_shadow_boundary(length):
+    """A half-plane 1e4 m / 1e5 m long (scene tolerances 0.01 m / 0.1 m); receivers at
+    k rho = 50 (0.8 m), 1e-9 rad and 0.5 deg from the incident shadow boundary and elsewhere,
+    against the exact solution (tolerance 3e-3 as above)."""
+    s = quads_scene([[[-length / 2, 0, -50], [length / 2, 0, -50], [length / 2, 0, 0], [-length / 2, 0, 0]]])
+    freq = 3e9
+    k = 2 * np.pi * freq / C0
+    phi_p = np.deg2rad(60.0)
+
+    def u(phi):
+        return np.stack([np.zeros_like(phi), np.sin(phi), -np.cos(phi)], axis=-1)
+
+    tx = 2e4 * u(np.array([phi_p]))
+    sb = phi_p + np.pi
+    phis = np.array([0.3, 1.2, 2.5, sb - np.deg2rad(0.5), sb - 1e-9, sb + 1e-9, sb + np.deg2rad(0.5), 5.5, 6.1])
+    for pol in ("soft", "hard"):
+        got = halfplane_scalar_total(s, tx, (50.0 / k) * u(phis), pol, freq, top_edge(s), OPTS)
+        np.testing.assert_allclose(got, halfplane_plane_wave(50.0, phis, phi_p, pol), atol=3e-3, err_msg=pol)
+
+
+# ---- nearly parallel edges ------------------------------------------------------------------------
+B7 = (
+    "BUG: build_dihedra step 4 merges two edges that share a vertex, carry the same polygon and "
+    "whose directions agree within coplanar_angle, even when they leave the vertex on the same "
+    "side (the two long sides of a needle triangle): one of them disappears, with its diffraction"
+)
+
+
+@pytest.mark.parametrize(
+    "h", [1e-2, 1e-3] + [pytest.param(h, marks=pytest.mark.xfail(strict=True, reason=B7)) for h in (1e-4, 5e-5)]
+)
+def test_needle_plate_keeps_both_nearly_parallel_edges(h):
+    """A needle triangle (0,0,0), (10,0,0), (10,0,h) standing in y = 0: its long edges meet at
+    the angle h / 10 (1e-3 .. 5e-6 rad). Both diffract: each has its Keller point inside (checked
+    in closed form), so two diffraction paths; and as the needle vanishes the total field tends
+    to the direct field (within 5 % here, h <= 1e-2 m = lambda / 10)."""
+    s = tri_scene([[0, 0, 0], [10, 0, 0], [10, 0, h]], [[0, 1, 2]])
+    tx, rx = np.array([[5.0, -4.0, 0.3]]), np.array([[5.5, 6.0, -0.2]])
+    t, p, f = total_field(s, tx, rx, OPTS)
+    check_laws(s, p)
+    long_edges = [i for i in range(len(s.dihedra)) if s.dihedra.length[i] > 5]
+    on_long = [i for i in range(len(p)) if p.depth[i] == 1 and p.interactions[i, 0] == DIFF and p.primitive[i, 0] in long_edges]
+    # closed form: both edges run from the origin, so the Keller parameter along each is
+    # t = (t_e d_r + t_r d_e) / (d_e + d_r) with t, d measured on that edge's line
+    for end in ([10, 0, 0], [10, 0, h]):
+        w = np.array(end, float) / np.linalg.norm(end)
+        te, tr = tx[0] @ w, rx[0] @ w
+        de, dr = np.linalg.norm(tx[0] - te * w), np.linalg.norm(rx[0] - tr * w)
+        assert 0 < (te * dr + tr * de) / (de + dr) < np.linalg.norm(end)
+    assert len(on_long) == 2
+    los = f.a_phased[p.depth == 0].sum()
+    assert abs(t[0] - los) <= 0.05 * abs(los)
+
+
+@pytest.mark.parametrize("tilt", [0.0, 1e-7, 1e-4])
+def test_slit_between_nearly_parallel_edges_is_complete(tilt):
+    """Two screens of different objects in y = 0, a 5 cm slit between their edges, one screen
+    tilted by ``tilt`` in its plane: the path set equals the brute-force enumeration."""
+    g = 0.05
+    c, sn = np.cos(tilt), np.sin(tilt)
+    lower = [[-20, 0, -20], [20, 0, -20], [20, 0, 0], [-20, 0, 0]]
+    upper = [[x * c - (z - g) * sn, 0, g + x * sn + (z - g) * c] for x, _, z in
+             ([-20, 0, g], [20, 0, g], [20, 0, 20], [-20, 0, 20])]
+    s = quads_scene([lower, upper])
+    for tx, rx in (((0.3, -4.0, 0.02), (-0.2, 3.0, 0.04)), ((1.0, -2.0, 1.0), (-1.5, 5.0, -0.7))):
+        got, _ = assert_complete(s, np.array(tx), np.array(rx), max_reflections=1, diffraction=True,
+                                 diffraction_reflections=0)
+        assert sum(1 for k in got if k[0] == ("D",)) >= 2
+
+
+# ---- sliver triangles ---------------------------------------------------------------------------------
+def sliver_ground(delta: float):
+    """The 100 m ground square as one polygon of slivers: an extra vertex E at ``delta`` from
+    the corner A on the bottom edge and a vertex M at height ``delta`` above the bottom edge's
+    midpoint; triangles (A, E, D) and (E, M, ...) have aspect ratios up to 1e2 / delta."""
+    A, B, C, D = [-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]
+    E, M = [-50 + delta, -50, 0], [0, -50 + delta, 0]
+    v = [A, B, C, D, E, M]
+    t = [[0, 4, 3], [4, 5, 3], [4, 1, 5], [5, 1, 2], [5, 2, 3]]
+    return tri_scene(v, t)
+
+
+@pytest.mark.parametrize("delta", [1e-2, 1e-3, 5e-4])
+def test_sliver_triangles_reflect_exactly_once_with_the_image_length(delta):
+    """Reflection points inside the slivers, and 1e-10 m either side of their shared
+    (interior, flat) edges: exactly one ground reflection each, at the image-method point and
+    length (rel 1e-12), and no diffraction on an interior edge."""
+    s = sliver_ground(delta)
+    assert s.num_polygons == 1
+    v = np.array([1.0, 0.3, -1.0]) / np.linalg.norm([1.0, 0.3, -1.0])
+    S = np.array([1.0, 1.0, -1.0])
+    # interior edges E-D and E-M and M-D; points on them and just off them, and inside slivers
+    pts = []
+    for a, b in (([-50 + delta, -50, 0], [-50, 50, 0]), ([-50 + delta, -50, 0], [0, -50 + delta, 0]),
+                 ([0, -50 + delta, 0], [-50, 50, 0])):
+        a, b = np.array(a), np.array(b)
+        m = a + 0.37 * (b - a)
+        nrm = np.cross(b - a, [0, 0, 1.0])
+        nrm /= np.linalg.norm(nrm)
+        pts += [m, m + 1e-10 * nrm, m - 1e-10 * nrm]
+    pts += [[-50 + delta / 4, 0.0, 0], [-25.0, -50 + delta / 4, 0]]
+    for r0 in np.array(pts, float):
+        tx, rx = r0 - 5.0 * v, r0 + 7.0 * v * S
+        p = trace(s, tx[None], rx[None], TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=0))
+        refl = np.nonzero((p.depth == 1) & (p.interactions[:, 0] == REFL))[0]
+        assert len(refl) == 1, (r0, len(refl))
+        np.testing.assert_allclose(p.vertices[refl[0], 1], r0, atol=1e-9)
+        assert p.lengths[refl[0]] == pytest.approx(12.0, rel=1e-12)
+        diff = p.primitive[p.interactions[:, 0] == DIFF, 0] if p.max_depth else []
+        for d in diff:  # only the square's outer border diffracts
+            o, w = s.dihedra.origin[d], s.dihedra.direction[d]
+            assert max(abs(o[0]), abs(o[1])) == pytest.approx(50.0) and (abs(w[0]) == 1 or abs(w[1]) == 1)
