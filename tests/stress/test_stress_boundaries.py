@@ -28,8 +28,8 @@ DELTA = 1e-9  # [rad] the issue's "within 1e-9 rad"
 CONTINUITY = 1e-6  # relative to the total field, see the module docstring
 OPTS = TraceOptions(max_reflections=1, diffraction_reflections=0)
 
-B2 = (
-    "BUG: a reflection point up to ~1e-9 (relative barycentric margin of points_in_polygons) "
+S1 = (
+    "BUG S1: a reflection point up to ~1e-9 (relative barycentric margin of points_in_polygons) "
     "outside its polygon is accepted, so within ~1e-8 rad of a reflection boundary the GO "
     "reflection is kept on the shadow side while UTD takes the shadow-side limit: the total "
     "field jumps by 20-100 %"
@@ -74,7 +74,7 @@ def boundary_direction(tx: np.ndarray, kind: str) -> np.ndarray:
 def case_params():
     out = []
     for name, tx, kind in CASES:
-        marks = [pytest.mark.xfail(strict=True, reason=B2)] if kind.startswith("reflection") else []
+        marks = [pytest.mark.xfail(strict=True, reason=S1)] if kind.startswith("reflection") else []
         out.append(pytest.param(name, tx, kind, id=f"{name}-{kind}", marks=marks))
     return out
 
@@ -123,7 +123,7 @@ def test_total_field_exactly_on_a_boundary_is_the_limit_from_both_sides(name, tx
         assert abs(dif[0] - dif[2]) > 0.1 * abs(t).max()  # a boundary indeed
 
 
-@pytest.mark.parametrize("kind", ["shadow", pytest.param("reflection", marks=pytest.mark.xfail(strict=True, reason=B2))])
+@pytest.mark.parametrize("kind", ["shadow", pytest.param("reflection", marks=pytest.mark.xfail(strict=True, reason=S1))])
 @pytest.mark.parametrize("pol", ["soft", "hard"])
 def test_half_plane_within_1e9_rad_of_a_boundary_matches_sommerfeld(kind, pol):
     """Exact reference: Sommerfeld's half-plane under a plane wave (tx 2e4 m away), on both

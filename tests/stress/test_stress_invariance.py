@@ -53,8 +53,8 @@ MOVES = {
 }
 
 
-B10 = (
-    "BUG: Embree false self-occlusion at shallow angles: the end of a segment on a reflection "
+S9 = (
+    "BUG S9: Embree false self-occlusion at shallow angles: the end of a segment on a reflection "
     "point is pulled in by ray_offset along the ray, leaving ray_offset * sin(grazing angle) of "
     "clearance from the surface; once the surface's float32 vertices are not exact (any rotation) "
     "that is below float32 resolution and the ray hits its own polygon. Here the D-R path "
@@ -65,7 +65,7 @@ B10 = (
 def invariance_params():
     for name in CASES:
         for move in MOVES:
-            marks = [pytest.mark.xfail(strict=True, reason=B10)] if (name, move) == ("street_canyon", "rotated") else []
+            marks = [pytest.mark.xfail(strict=True, reason=S9)] if (name, move) == ("street_canyon", "rotated") else []
             yield pytest.param(name, move, id=f"{name}-{move}", marks=marks)
 
 
@@ -99,13 +99,13 @@ def test_moved_and_rotated_scene_gives_the_same_paths_and_fields(name, move):
 
 
 # ---- end points far away ---------------------------------------------------------------------------
-B5 = (
-    "BUG: path_field_vectors takes s (after the diffraction) as total - s_before: catastrophic "
+S4 = (
+    "BUG S4: path_field_vectors takes s (after the diffraction) as total - s_before: catastrophic "
     "cancellation when the source is far (s' >> s); the spreading factor is off by ~ulp(s')/s "
     "(1e-3 at 1e15 m) and becomes 1/0 -> inf/NaN at 1e18 m"
 )
-B6 = (
-    "BUG: raycast.shortened builds the far end of a segment as a + (|b - a| - 2 offset) * unit: "
+S5 = (
+    "BUG S5: raycast.shortened builds the far end of a segment as a + (|b - a| - 2 offset) * unit: "
     "from a source 1e12 m away its absolute error (ulp ~1e-4 m) reaches the ray offset, so the "
     "segment arriving at a diffraction point touches the wedge's faces and is reported occluded "
     "(the path disappears; here at 1e12 and 1e13 m)"
@@ -123,8 +123,8 @@ def far_wedge_paths(d: float):
 @pytest.mark.parametrize(
     "d",
     [1e4, 1e7]
-    + [pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=B6)) for d in (1e12, 1e13)]
-    + [pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=B5)) for d in (1e15, 1e18)],
+    + [pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=S5)) for d in (1e12, 1e13)]
+    + [pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=S4)) for d in (1e15, 1e18)],
 )
 def test_far_transmitter_keeps_the_edge_diffraction_with_exact_spreading(d):
     """A transmitter ``d`` metres away, the receiver 5.3 m behind the wedge's edge: the edge
@@ -143,15 +143,15 @@ def test_far_transmitter_keeps_the_edge_diffraction_with_exact_spreading(d):
     assert np.isfinite(spreading[i]) and abs(spreading[i] / want - 1) <= 1e-9
 
 
-B5_RANGE = (
-    "BUG: positions far beyond the scene (here 1e20 .. 1e300 m, finite) are accepted by "
+S4_RANGE = (
+    "BUG S4: positions far beyond the scene (here 1e20 .. 1e300 m, finite) are accepted by "
     "check_positions but overflow or cancel inside (norms, s = total - s_before): RuntimeWarnings, "
     "NaN coefficients or a non-WavepathsError exception instead of a result or a clear refusal"
 )
 
 
 @pytest.mark.parametrize(
-    "d", [1e9] + [pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=B5_RANGE)) for d in (1e20, 1e100, 1e300)]
+    "d", [1e9] + [pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=S4_RANGE)) for d in (1e20, 1e100, 1e300)]
 )
 def test_any_finite_position_gives_finite_fields_or_a_wavepaths_error(d):
     """"No NaN or inf for any finite input": trace and compute_fields either return finite

@@ -10,12 +10,12 @@ import pytest
 from wavepaths import TraceOptions, trace
 from wavepaths.exact.halfplane import halfplane_plane_wave
 from wavepaths.exact.wedge import wedge_plane_wave
-from wavepaths.scene import WavepathsWarning, build_scene
 from wavepaths.em.materials import PEC
+from wavepaths.scene import WavepathsWarning, build_scene
 
 from ..conftest import quads_scene
 from ..search.brute_force import enumerate_paths
-from .helpers import DIFF, REFL, check_laws, config, halfplane_scalar_total, path_table, rotate_yz, top_edge, total_field
+from .helpers import DIFF, REFL, check_laws, config, halfplane_scalar_total, top_edge, total_field
 
 OPTS = TraceOptions(max_reflections=1, diffraction_reflections=0)
 C0 = 299_792_458.0
@@ -92,14 +92,14 @@ def test_nearly_flat_wedge_tends_to_the_flat_plate(dn, pol):
 
 
 # ---- n near 2 and n = 2 ------------------------------------------------------------------------
-B8 = (
-    "BUG: in a thin wedge (interior angle alpha), the hidden inner face lies alpha r behind the "
+S7 = (
+    "BUG S7: in a thin wedge (interior angle alpha), the hidden inner face lies alpha r behind the "
     "front face at distance r from the edge; when alpha r < ray_offset (1e-6 of the diagonal) the "
     "segment to a reflection point on the hidden face is shortened past the front face, so a "
     "reflection *through* the front face is accepted (error ~ the whole reflected field)"
 )
-B9 = (
-    "BUG: a zero-thickness double-sided screen (the same quad twice with opposite orientations, "
+S8 = (
+    "BUG S8: a zero-thickness double-sided screen (the same quad twice with opposite orientations, "
     "e.g. a thin wedge welded flat) is taken as a closed object with an arbitrary outward side "
     "and reflects on one side only; as two objects, both copies are 'hidden contact faces' and "
     "reflect on neither side (the missing reflection is the whole GO field)"
@@ -122,15 +122,15 @@ def double_screen(objects):
 N2_CASES = [
     pytest.param(lambda: thin_wedge(1e-1), 1e-1, id="interior_0.1"),
     pytest.param(lambda: thin_wedge(1e-2), 1e-2, id="interior_1e-2"),
-    pytest.param(lambda: thin_wedge(1e-3), 1e-3, id="interior_1e-3", marks=pytest.mark.xfail(strict=True, reason=B8)),
-    pytest.param(lambda: thin_wedge(1e-4), 1e-4, id="interior_1e-4", marks=pytest.mark.xfail(strict=True, reason=B8)),
+    pytest.param(lambda: thin_wedge(1e-3), 1e-3, id="interior_1e-3", marks=pytest.mark.xfail(strict=True, reason=S7)),
+    pytest.param(lambda: thin_wedge(1e-4), 1e-4, id="interior_1e-4", marks=pytest.mark.xfail(strict=True, reason=S7)),
     pytest.param(lambda: thin_wedge(1e-6), 0.0, id="interior_1e-6_below_coplanar"),
     pytest.param(lambda: thin_wedge(1e-8, flip=True), 0.0, id="interior_1e-8_welded_same_orientation"),
     pytest.param(lambda: thin_wedge(1e-8), 0.0, id="interior_1e-8_welded_closed",
-                 marks=pytest.mark.xfail(strict=True, reason=B9)),
+                 marks=pytest.mark.xfail(strict=True, reason=S8)),
     pytest.param(lambda: double_screen([0, 0]), 0.0, id="double_sided_one_object"),
     pytest.param(lambda: double_screen([0, 1]), 0.0, id="double_sided_two_objects",
-                 marks=pytest.mark.xfail(strict=True, reason=B9)),
+                 marks=pytest.mark.xfail(strict=True, reason=S8)),
 ]
 
 
@@ -207,15 +207,15 @@ def test_very_long_edge_matches_sommerfeld_near_its_shadow_boundary(length):
 
 
 # ---- nearly parallel edges ------------------------------------------------------------------------
-B7 = (
-    "BUG: build_dihedra step 4 merges two edges that share a vertex, carry the same polygon and "
+S6 = (
+    "BUG S6: build_dihedra step 4 merges two edges that share a vertex, carry the same polygon and "
     "whose directions agree within coplanar_angle, even when they leave the vertex on the same "
     "side (the two long sides of a needle triangle): one of them disappears, with its diffraction"
 )
 
 
 @pytest.mark.parametrize(
-    "h", [1e-2, 1e-3] + [pytest.param(h, marks=pytest.mark.xfail(strict=True, reason=B7)) for h in (1e-4, 5e-5)]
+    "h", [1e-2, 1e-3] + [pytest.param(h, marks=pytest.mark.xfail(strict=True, reason=S6)) for h in (1e-4, 5e-5)]
 )
 def test_needle_plate_keeps_both_nearly_parallel_edges(h):
     """A needle triangle (0,0,0), (10,0,0), (10,0,h) standing in y = 0: its long edges meet at

@@ -1,0 +1,59 @@
+"""Run one benchmark step in a child process, with a time limit and its own memory peak.
+
+A step that may take too long (a large scene at a high order) or whose peak memory is
+wanted (``ru_maxrss`` of a fresh process, which counts Embree's and Dr.Jit's memory too)
+runs here. The child imports the named function, calls it with the keyword arguments,
+and sends back its JSON-ready result; on time-out it is killed and the result says so.
+"""
+
+from __future__ import annotations
+
+import importlib
+import multiprocessing as mp
+import resource
+import time
+import traceback
+
+
+def _child(queue, module: str, name: str, kwargs: dict) -> None:
+    try:
+        fn = getattr(importlib.import_module(module), name)
+        result = fn(**kwargs)
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        queue.put({"ok": True, "result": result, "max_rss_bytes": int(peak)})
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent
+        queue.put({"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()})
+
+
+def run_isolated(module: str, name: str, kwargs: dict | None = None, timeout_s: float = 600.0) -> dict:
+    """Call ``module.name(**kwargs)`` in a fresh process; give up after ``timeout_s``.
+
+    Returns
+    -------
+    dict
+        ``ok`` (bool), ``result`` (what the function returned) or ``error``,
+        ``timed_out`` (bool), ``wall_s`` (child wall time, start-up included) and
+        ``max_rss_bytes`` (the child's resident peak).
+    """
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_child, args=(queue, module, name, kwargs or {}), daemon=True)
+    t0 = time.perf_counter()
+    proc.start()
+    out = None
+    try:
+        out = queue.get(timeout=timeout_s)
+    except Exception:  # queue.Empty on time-out
+        out = None
+    wall = time.perf_counter() - t0
+    if out is None:
+        proc.kill()
+        proc.join(5)
+        return {"ok": False, "timed_out": True, "error": f"did not finish within {timeout_s:g} s", "wall_s": wall}
+    proc.join(30)
+    if proc.is_alive():  # pragma: no cover - the child sent its result and hangs on exit
+        proc.kill()
+        proc.join(5)
+    out["timed_out"] = False
+    out["wall_s"] = wall
+    return out

@@ -1,0 +1,102 @@
+"""Timing and memory helpers shared by the benchmarks.
+
+The machine is shared and noisy (2 cores, other jobs): every comparison of two speeds is
+measured in one run, the contenders interleaved round by round, and reported as the
+median over rounds (with the spread). Peak memory is measured in a separate run with
+``tracemalloc`` (numpy reports its buffers to it), so that tracing does not slow the
+timed runs; memory held by Embree's BVH and by Dr.Jit is not seen by it, and the
+process's resident peak (``ru_maxrss``) is reported beside it.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import resource
+import statistics
+import time
+import tracemalloc
+from dataclasses import dataclass, field
+from typing import Callable
+
+
+@dataclass
+class Rounds:
+    """Wall times of repeated runs of one contender.
+
+    Attributes
+    ----------
+    times_s : list of float
+        One wall time per round [s].
+    """
+
+    times_s: list[float] = field(default_factory=list)
+
+    @property
+    def median_s(self) -> float:
+        return statistics.median(self.times_s)
+
+    @property
+    def min_s(self) -> float:
+        return min(self.times_s)
+
+    @property
+    def max_s(self) -> float:
+        return max(self.times_s)
+
+    def as_dict(self) -> dict:
+        return {"median_s": self.median_s, "min_s": self.min_s, "max_s": self.max_s, "rounds": len(self.times_s),
+                "times_s": list(self.times_s)}
+
+
+def interleaved(contenders: dict[str, Callable[[], object]], rounds: int) -> dict[str, Rounds]:
+    """Run each contender once per round, in turn, ``rounds`` times; return their wall times.
+
+    Interleaving spreads the machine's load changes over all contenders alike.
+    """
+    out = {name: Rounds() for name in contenders}
+    for _ in range(rounds):
+        for name, fn in contenders.items():
+            gc.collect()
+            t0 = time.perf_counter()
+            fn()
+            out[name].times_s.append(time.perf_counter() - t0)
+    return out
+
+
+def timed(fn: Callable[[], object]) -> tuple[object, float]:
+    """(result, wall time [s]) of one call."""
+    gc.collect()
+    t0 = time.perf_counter()
+    result = fn()
+    return result, time.perf_counter() - t0
+
+
+def peak_python_memory(fn: Callable[[], object]) -> tuple[object, int]:
+    """(result, peak bytes allocated through Python and numpy during ``fn``)."""
+    gc.collect()
+    was = tracemalloc.is_tracing()
+    if not was:
+        tracemalloc.start()
+    tracemalloc.reset_peak()
+    base = tracemalloc.get_traced_memory()[0]
+    try:
+        result = fn()
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        if not was:
+            tracemalloc.stop()
+    return result, int(peak)
+
+
+def max_rss_bytes() -> int:
+    """Peak resident memory of this process so far [bytes] (Linux reports KiB)."""
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def load_average() -> list[float]:
+    """The 1, 5 and 15 minute load averages (other jobs on the machine)."""
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:  # pragma: no cover
+        return []
