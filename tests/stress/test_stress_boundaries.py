@@ -74,7 +74,7 @@ def boundary_direction(tx: np.ndarray, kind: str) -> np.ndarray:
 def case_params():
     out = []
     for name, tx, kind in CASES:
-        marks = [pytest.mark.xfail(strict=True, reason=S1)] if kind.startswith("reflection") else []
+        marks = []  # S1 fixed: the diffraction takes the side of the geometrical-optics decision
         out.append(pytest.param(name, tx, kind, id=f"{name}-{kind}", marks=marks))
     return out
 
@@ -88,9 +88,19 @@ def test_total_field_is_continuous_within_1e9_rad_of_a_boundary(name, tx, kind, 
     rx = np.array([rho * rotate_yz(b, s * DELTA) for s in (-1, 1)])
     for pol in ("V", "H"):
         t, p, f = total_field(scene, tx, rx, OPTS, pol)
-        # not vacuous: the diffracted field alone jumps here (a boundary indeed)
-        dif = per_receiver(p, f.a_phased, 2, ~go_mask(p))
-        assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
+        # not vacuous: a boundary indeed. Either the search's geometrical-optics decision
+        # switches between the two receivers (the diffracted field alone then jumps), or it puts
+        # both, within its float margin of the edge, on one side, and the diffracted field
+        # follows it; 1e-3 rad away the diffracted field must jump in any case.
+        go = go_mask(p)
+        same_go = (np.bincount(p.rx_index[go], minlength=2)[0] == np.bincount(p.rx_index[go], minlength=2)[1])
+        dif = per_receiver(p, f.a_phased, 2, ~go)
+        if not same_go:
+            assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
+        far = np.array([rho * rotate_yz(b, s * 1e-3) for s in (-1, 1)])
+        t2, p2, f2 = total_field(scene, tx, far, OPTS, pol)
+        dif2 = per_receiver(p2, f2.a_phased, 2, ~go_mask(p2))
+        assert abs(dif2[0] - dif2[1]) > 0.1 * abs(t2).max(), (pol, dif2)
         assert abs(t[0] - t[1]) <= CONTINUITY * abs(t).max(), (pol, t, abs(t[0] - t[1]) / abs(t).max())
 
 
@@ -123,7 +133,7 @@ def test_total_field_exactly_on_a_boundary_is_the_limit_from_both_sides(name, tx
         assert abs(dif[0] - dif[2]) > 0.1 * abs(t).max()  # a boundary indeed
 
 
-@pytest.mark.parametrize("kind", ["shadow", pytest.param("reflection", marks=pytest.mark.xfail(strict=True, reason=S1))])
+@pytest.mark.parametrize("kind", ["shadow", pytest.param("reflection", marks=())])
 @pytest.mark.parametrize("pol", ["soft", "hard"])
 def test_half_plane_within_1e9_rad_of_a_boundary_matches_sommerfeld(kind, pol):
     """Exact reference: Sommerfeld's half-plane under a plane wave (tx 2e4 m away), on both

@@ -128,7 +128,7 @@ def test_random_end_points_are_reciprocal(name):
     reciprocity_check(name, ON)()
 
 
-@pytest.mark.xfail(strict=True, reason=S11)
+# S11 fixed: sector_of and FindDihedron share one angular resolution (FACE_ANGLE_TOL)
 def test_random_end_points_next_to_faces_are_reciprocal():
     """The same with end points also 1e-9 m off the faces (three_face_edge: the awning's
     free edge and the three-face hinge)."""

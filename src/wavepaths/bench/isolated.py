@@ -15,7 +15,9 @@ import time
 import traceback
 
 
-def _child(queue, module: str, name: str, kwargs: dict) -> None:
+def _child(queue, module: str, name: str, kwargs: dict, memory_limit_bytes: int | None) -> None:
+    if memory_limit_bytes:
+        resource.setrlimit(resource.RLIMIT_AS, (memory_limit_bytes, memory_limit_bytes))
     try:
         fn = getattr(importlib.import_module(module), name)
         result = fn(**kwargs)
@@ -25,8 +27,13 @@ def _child(queue, module: str, name: str, kwargs: dict) -> None:
         queue.put({"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()})
 
 
-def run_isolated(module: str, name: str, kwargs: dict | None = None, timeout_s: float = 600.0) -> dict:
+def run_isolated(module: str, name: str, kwargs: dict | None = None, timeout_s: float = 600.0,
+                 memory_limit_bytes: int | None = 8 << 30) -> dict:
     """Call ``module.name(**kwargs)`` in a fresh process; give up after ``timeout_s``.
+
+    The child's address space is limited to ``memory_limit_bytes`` (a ``MemoryError``
+    then ends it cleanly instead of the machine's out-of-memory killer); the machine has
+    24 GiB and is shared.
 
     Returns
     -------
@@ -37,7 +44,7 @@ def run_isolated(module: str, name: str, kwargs: dict | None = None, timeout_s: 
     """
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(queue, module, name, kwargs or {}), daemon=True)
+    proc = ctx.Process(target=_child, args=(queue, module, name, kwargs or {}, memory_limit_bytes), daemon=True)
     t0 = time.perf_counter()
     proc.start()
     out = None

@@ -108,7 +108,7 @@ def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int):
         "e": e,
         "phi_prime": angle(prev - p),
         "phi": angle(nxt - p),
-        "beta_0": np.arccos(np.clip(_dot(s_in, e), -1.0, 1.0)),
+        "beta_0": np.arctan2(np.linalg.norm(np.cross(s_in, e), axis=1), _dot(s_in, e)),
         "n": wedge / np.pi,
         "s_in": s_in,
         "s_out": s_out,
@@ -134,6 +134,7 @@ def _sionna_face_order(g: dict) -> dict:
     return g
 
 
+SIN_BETA_0_FLOOR = 1e-6  # the default floor of wavepaths.em.utd
 BOUNDARY_EPS = 1e-12  # [rad] an observer this close to a shadow/reflection boundary is on it
 BOUNDARY_NUDGE = 1e-9  # [rad] the side it is moved to, matching the geometrical-optics decision
 
@@ -146,52 +147,63 @@ def _path_keys(paths: Paths) -> set:
     }
 
 
-def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g: dict) -> None:
-    """Observers exactly on a shadow or reflection boundary: put them on the side the
-    geometrical-optics path is on.
+def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g: dict, legs: np.ndarray) -> None:
+    """Observers on, or within the search's margin of, a shadow or reflection boundary:
+    put them on the side the geometrical-optics path is on.
 
-    Exactly on a boundary the UTD singular term is the mean of its one-sided limits (0),
-    which pairs with a GO weight of 1/2; the path search keeps or drops a GO path (weight 1
-    or 0). So the diffraction term takes the one-sided limit of the side the search chose:
-    the lit side when the GO path (the line of sight for the incident shadow boundary, the
-    reflection on the 0- or n-face for a reflection boundary) is among the paths, else the
-    shadow side. The total field is then the exact boundary value (e.g. 6.02 dB below free
-    space for a grazing knife edge).
+    The UTD term of a boundary switches sign across it, by the float64 angles; the
+    geometrical-optics (GO) path is kept or dropped by the search, whose decisions within
+    a few ``ray_offset`` of the edge (point-in-polygon margins, float32 casts) may fall on
+    the other side. Exactly on a boundary the UTD singular term is the mean of its
+    one-sided limits and needs a GO weight of 1/2 that the search cannot give. So when
+    the GO ray passes within ``4 ray_offset`` of the edge, the diffraction term takes the
+    one-sided limit of the side the search chose: the lit side when the GO path (the line
+    of sight for the incident shadow boundary, the reflection on the 0- or n-face for a
+    reflection boundary) is among the paths, else the shadow side. The total field is
+    then continuous, and exact on the boundary (6.02 dB below free space for a grazing
+    knife edge).
     """
     phi, pp, n = g["phi"], g["phi_prime"], g["n"]
+    delta = 4 * scene.length_tolerance(scene.tolerances.ray_offset)
+    margin = np.maximum(delta / np.maximum(legs, 1e-300), BOUNDARY_EPS)
     sb = np.abs(phi - pp) - np.pi
     rb0 = phi + pp - np.pi
     rbn = phi + pp - (2 * n - 1) * np.pi
-    on = (np.abs(sb) < BOUNDARY_EPS) | (np.abs(rb0) < BOUNDARY_EPS) | (np.abs(rbn) < BOUNDARY_EPS)
-    if not on.any():
+    near = (np.abs(sb) < margin) | (np.abs(rb0) < margin) | (np.abs(rbn) < margin)
+    if not near.any():
         return
     keys = _path_keys(paths)
     dih = scene.dihedra
-    for k in np.nonzero(on)[0]:
+    for k in np.nonzero(near)[0]:
         i = rows[k]
         seq = list(zip(paths.interactions[i, : paths.depth[i]].tolist(), paths.primitive[i, : paths.depth[i]].tolist()))
         t, r = int(paths.tx_index[i]), int(paths.rx_index[i])
-        if abs(sb[k]) < BOUNDARY_EPS:
+        if abs(sb[k]) < margin[k]:
             lit = (t, r, tuple(seq[:j] + seq[j + 1 :])) in keys
-            step = -np.sign(phi[k] - pp[k]) if lit else np.sign(phi[k] - pp[k])
+            if lit != (sb[k] < 0) or sb[k] == 0:
+                side = 1.0 if phi[k] >= pp[k] else -1.0
+                g["phi"][k] = pp[k] + side * (np.pi - BOUNDARY_NUDGE if lit else np.pi + BOUNDARY_NUDGE)
+        elif abs(rb0[k]) < margin[k]:
+            lit = (t, r, tuple(seq[:j] + [(1, int(dih.face_polygon[g["face_0"][k]]))] + seq[j + 1 :])) in keys
+            if lit != (rb0[k] < 0) or rb0[k] == 0:
+                g["phi"][k] = np.pi - pp[k] + (-BOUNDARY_NUDGE if lit else BOUNDARY_NUDGE)
         else:
-            face = g["face_0"][k] if abs(rb0[k]) < BOUNDARY_EPS else g["face_n"][k]
-            poly = int(dih.face_polygon[face])
-            lit = (t, r, tuple(seq[:j] + [(1, poly)] + seq[j + 1 :])) in keys
-            toward_face0 = abs(rb0[k]) < BOUNDARY_EPS
-            # lit by the 0-face reflection below phi = pi - phi'; by the n-face one above (2n - 1) pi - phi'
-            step = (-1.0 if lit else 1.0) if toward_face0 else (1.0 if lit else -1.0)
-        g["phi"][k] = phi[k] + step * BOUNDARY_NUDGE
+            lit = (t, r, tuple(seq[:j] + [(1, int(dih.face_polygon[g["face_n"][k]]))] + seq[j + 1 :])) in keys
+            if lit != (rbn[k] > 0) or rbn[k] == 0:
+                g["phi"][k] = (2 * n[k] - 1) * np.pi - pp[k] + (BOUNDARY_NUDGE if lit else -BOUNDARY_NUDGE)
 
 
 def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, j, s_before, s_after) -> np.ndarray:
     g = wedge_geometry(scene, paths, rows, j)
-    _on_boundary_sides(scene, paths, rows, j, g)
+    _on_boundary_sides(scene, paths, rows, j, g, np.minimum(s_before, s_after))
     if cfg.compat == "sionna":
         g = _sionna_face_order(g)
     e, s_in, s_out = g["e"], g["s_in"], g["s_out"]
     k = cfg.wavenumber
-    L = s_before * s_after / (s_before + s_after) * np.sin(g["beta_0"]) ** 2
+    # the coefficients floor |sin beta_0| at SIN_BETA_0_FLOOR; L takes the same floored sine, so
+    # that D (1/sin beta_0 times F(k L a) ~ sqrt(L)) tends to its finite grazing limit instead of 0
+    sin_b = np.maximum(np.abs(np.sin(g["beta_0"])), SIN_BETA_0_FLOOR)
+    L = s_before * s_after / (s_before + s_after) * sin_b**2
     dih = scene.dihedra
     mat0 = scene.triangle_material[dih.face_triangle[g["face_0"]]]
     matn = scene.triangle_material[dih.face_triangle[g["face_n"]]]
@@ -246,7 +258,7 @@ def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[
         diff = np.nonzero(kind == InteractionType.DIFFRACTION)[0]
         if len(diff):
             s_before = before[diff, j]
-            s_after = total[diff] - s_before
+            s_after = seg[diff, j + 1 :].sum(axis=1)  # summed, not total - s_before: no cancellation
             E[diff] = _apply_diffraction(scene, cfg, E[diff], paths, diff, j, s_before, s_after)
             spreading[diff] = 1.0 / np.sqrt(s_before * s_after * (s_before + s_after))
     return E, spreading

@@ -66,4 +66,7 @@ def shortened(a: np.ndarray, b: np.ndarray, offset: float) -> tuple[np.ndarray, 
     d = b - a
     full = np.linalg.norm(d, axis=1)
     unit = d / np.where(full > 0, full, 1.0)[:, None]
-    return a + offset * unit, unit, full - 2.0 * offset
+    start = a + offset * unit
+    end = b - offset * unit  # from b itself, not a + (|b - a| - 2 offset) u: no rounding at far ends
+    length = np.einsum("ij,ij->i", end - start, unit)
+    return start, unit, length

@@ -88,12 +88,11 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
         dihedra = scene.dihedra
         sectors = sector_table(dihedra)
         stride = int(sectors.angles.shape[1]) + 1
-        ang_tol = 1e-12
         for a in range(options.diffraction_reflections + 1):
             lv = levels[a]
             c = np.repeat(np.arange(len(lv)), len(diffracting))
             d = np.tile(diffracting, len(lv))
-            sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d], ang_tol)
+            sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
             keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
             stats[f"diffraction_sources_order_{a}_considered"] = int(len(c))
             stats[f"diffraction_sources_order_{a}_kept"] = int(keep.sum())

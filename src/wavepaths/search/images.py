@@ -142,7 +142,9 @@ def build_image_levels(
         q = np.tile(mirrors, c)
         parent = lv.last[chain]
         side = np.einsum("ij,ij->i", parent, n[q]) - d[q]
-        keep = np.abs(side) > tol
+        # a source exactly in the plane has no image; one merely close to it (even closer than
+        # the geometric tolerance) still reflects
+        keep = np.abs(side) > (tol if k >= 2 else 1e-12 * scene.diagonal)
         two_sided = (outward[q] == 0) | inside[lv.source[chain], scene.polygon_object[q]]
         keep &= two_sided | (outward[q] * side > 0)  # closed objects: from outside only
         if k >= 2:

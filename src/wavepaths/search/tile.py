@@ -36,7 +36,10 @@ def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact
     """
     k, s, _ = vertices.shape
     seg = np.linalg.norm(np.diff(vertices, axis=1), axis=2)
-    degenerate = (seg <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
+    # only segments joining two interactions can be degenerate; a transmitter or receiver may
+    # sit as close to a surface as it likes
+    inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))
+    degenerate = (inner <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
     a = vertices[:, :-1].reshape(-1, 3)
     b = vertices[:, 1:].reshape(-1, 3)
     blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)

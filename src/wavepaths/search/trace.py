@@ -32,8 +32,12 @@ from .paths import Paths, assemble
 from .tile import trace_tile
 
 
+MAX_COORDINATE = 1e9  # [m] positions beyond this lose the float64 precision the engine needs
+
+
 def check_positions(name: str, value, allow_empty: bool = False) -> np.ndarray:
-    """Positions as a finite (k, 3) float64 array, or a :class:`WavepathsError` that says why."""
+    """Positions as a finite (k, 3) float64 array within +-``MAX_COORDINATE`` metres,
+    or a :class:`WavepathsError` that says why."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim == 1 and arr.shape[0] == 3:
         arr = arr[None, :]
@@ -44,6 +48,12 @@ def check_positions(name: str, value, allow_empty: bool = False) -> np.ndarray:
     bad = ~np.isfinite(arr).all(axis=1)
     if bad.any():
         raise WavepathsError(f"`{name}` has NaN or infinite coordinates at row(s) {np.nonzero(bad)[0][:10].tolist()}")
+    far = (np.abs(arr) > MAX_COORDINATE).any(axis=1)
+    if far.any():
+        raise WavepathsError(
+            f"`{name}` has coordinates beyond {MAX_COORDINATE:g} m at row(s) {np.nonzero(far)[0][:10].tolist()} "
+            "(float64 cannot resolve wavelengths there)"
+        )
     return arr
 
 

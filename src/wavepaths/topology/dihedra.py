@@ -273,6 +273,12 @@ def build_dihedra(scene: "Scene") -> Dihedra:
     pa, pb = ve[:-1][same_v], ve[1:][same_v]
     # only adjacent pairs in the sorted order: enough when exactly two edges of a set meet
     ok = (set_id[pa] == set_id[pb]) & (np.abs(np.einsum("ij,ij->i", w[pa], w[pb])) >= cos_tol)
+    # and only when they leave the shared vertex in opposite directions (a needle's two long
+    # edges share a vertex and a direction, but are two edges)
+    shared = vv[1:][same_v]
+    other_a = np.where(inc.edges[pa, 0] == shared, inc.edges[pa, 1], inc.edges[pa, 0])
+    other_b = np.where(inc.edges[pb, 0] == shared, inc.edges[pb, 1], inc.edges[pb, 0])
+    ok &= np.einsum("ij,ij->i", verts[other_a] - verts[shared], verts[other_b] - verts[shared]) < 0
     if ok.any():
         # a vertex where more than two edges of the same set meet is a branching point: do not merge there
         vcount = np.bincount(vv, minlength=len(verts))

@@ -106,35 +106,42 @@ def find_dihedron(
     present = slots[None, :] < count[:, None]  # (k, m)
     idx = np.where(present, start[:, None] + slots[None, :], 0)
     pf = dihedra.face_direction[idx]  # (k, m, 3)
+    # The seed compares cosines c_i = u_e . P_f^i; near a face (c_i -> 1) a cosine resolves
+    # angles only to ~1.5e-8 rad, so the same comparisons are made on the angles themselves,
+    # atan2(|sin|, cos) in [0, pi], which are exact to rounding at every angle: "c > tmax"
+    # (closer to u_e than the nearest face of that side) reads "angle < nearest angle".
     ci = np.einsum("kj,kmj->km", ue, pf)
+    si = np.einsum("kmj,kj->km", np.cross(ue[:, None, :], pf), w)  # signed sine about w
+    ang = np.arctan2(np.abs(si), ci)
     in_b = np.einsum("kj,kmj->km", up, pf) < 0
     in_t = ~in_b & present
     in_b &= present
 
     big = np.inf
-    t_lo = np.where(in_t, ci, big)
-    t_hi = np.where(in_t, ci, -big)
-    b_lo = np.where(in_b, ci, big)
-    b_hi = np.where(in_b, ci, -big)
     rows = np.arange(k)
-    i_tmin, i_tmax = t_lo.argmin(axis=1), t_hi.argmax(axis=1)
-    i_bmin, i_bmax = b_lo.argmin(axis=1), b_hi.argmax(axis=1)
-    tmin, tmax = t_lo[rows, i_tmin], t_hi[rows, i_tmax]
-    bmin, bmax = b_lo[rows, i_bmin], b_hi[rows, i_bmax]
+    t_near = np.where(in_t, ang, big)  # nearest face on each side: smallest angle (the seed's tmax)
+    t_far = np.where(in_t, ang, -big)  # farthest: largest angle (the seed's tmin)
+    b_near = np.where(in_b, ang, big)
+    b_far = np.where(in_b, ang, -big)
+    i_tn, i_tf = t_near.argmin(axis=1), t_far.argmax(axis=1)
+    i_bn, i_bf = b_near.argmin(axis=1), b_far.argmax(axis=1)
+    tn, tf = t_near[rows, i_tn], t_far[rows, i_tf]
+    bn, bf = b_near[rows, i_bn], b_far[rows, i_bf]
     has_t = in_t.any(axis=1)
     has_b = in_b.any(axis=1)
 
-    c = np.clip(np.einsum("ij,ij->i", ue, ur), -1.0, 1.0)
+    cr = np.einsum("ij,ij->i", ue, ur)
+    sr = np.einsum("ij,ij->i", np.cross(ue, ur), w)
+    alpha = np.arctan2(np.abs(sr), cr)  # angle from u_e to u_r, in [0, pi]
     r_in_b = np.einsum("ij,ij->i", up, ur) < 0
-    valid_b = ~has_b | (c > bmax) | (~has_t & (c < bmin))
-    valid_t = ~has_t | (c > tmax) | (~has_b & (c < tmin))
+    valid_b = ~has_b | (alpha < bn) | (~has_t & (alpha > bf))
+    valid_t = ~has_t | (alpha < tn) | (~has_b & (alpha > tf))
     valid = np.where(r_in_b, valid_b, valid_t) & (count > 0)
 
-    face_0 = np.where(has_t, idx[rows, i_tmax], idx[rows, i_bmin])
-    face_n = np.where(has_b, idx[rows, i_bmax], idx[rows, i_tmin])
-    theta_t = np.where(has_t, np.arccos(np.clip(tmax, -1, 1)), 2 * np.pi - np.arccos(np.clip(bmin, -1, 1)))
-    theta_b = np.where(has_b, np.arccos(np.clip(bmax, -1, 1)), 2 * np.pi - np.arccos(np.clip(tmin, -1, 1)))
-    alpha = np.arccos(c)
+    face_0 = np.where(has_t, idx[rows, i_tn], idx[rows, i_bf])
+    face_n = np.where(has_b, idx[rows, i_bn], idx[rows, i_tf])
+    theta_t = np.where(has_t, tn, 2 * np.pi - bf)
+    theta_b = np.where(has_b, bn, 2 * np.pi - tf)
     phi = np.mod(np.where(r_in_b, theta_t + alpha, theta_t - alpha), 2 * np.pi)
     return DihedronTest(
         valid=valid,

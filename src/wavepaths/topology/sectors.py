@@ -15,6 +15,9 @@ import numpy as np
 
 from .dihedra import Dihedra
 
+FACE_ANGLE_TOL = 1e-7  # [rad] a point this close to a face's direction is "on the face": FindDihedron's
+# cosine tests resolve angles to ~1.5e-8 rad only, so the pre-filter must not be finer than that
+
 
 @dataclass(frozen=True)
 class SectorTable:
@@ -62,7 +65,8 @@ def sector_table(dihedra: Dihedra) -> SectorTable:
     return SectorTable(x_hat, y_hat, table, count, width)
 
 
-def sector_of(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, origin: np.ndarray, tol: float = 1e-12):
+def sector_of(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, origin: np.ndarray,
+              tol: float = FACE_ANGLE_TOL):
     """Sector index and width for ``points`` around ``dihedron`` edges.
 
     Parameters
