@@ -207,7 +207,7 @@ S9 = (
 
 
 @pytest.mark.parametrize(
-    "grazing_deg", [2.0, 0.5] + [pytest.param(g, marks=pytest.mark.xfail(strict=True, reason=S9)) for g in (0.2, 0.05)]
+    "grazing_deg", [2.0, 0.5] + [pytest.param(g, marks=()) for g in (0.2, 0.05)]  # S9 fixed: interaction points lifted off their faces for the casts
 )
 def test_grazing_ground_reflection_survives_a_rotated_ground(grazing_deg):
     """A 200 m PEC ground square, rotated (its float32 copy is then inexact); transmitter and

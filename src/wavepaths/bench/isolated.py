@@ -1,7 +1,7 @@
 """Run one benchmark step in a child process, with a time limit and its own memory peak.
 
 A step that may take too long (a large scene at a high order) or whose peak memory is
-wanted (``ru_maxrss`` of a fresh process, which counts Embree's and Dr.Jit's memory too)
+wanted (the resident peak of a fresh process, which counts Embree's and Dr.Jit's memory too)
 runs here. The child imports the named function, calls it with the keyword arguments,
 and sends back its JSON-ready result; on time-out it is killed and the result says so.
 """
@@ -10,19 +10,34 @@ from __future__ import annotations
 
 import importlib
 import multiprocessing as mp
+import os
+import signal
 import resource
 import time
 import traceback
 
 
+def peak_rss_bytes() -> int:
+    """This process's resident peak [bytes]: ``VmHWM`` (reset by exec, unlike ``ru_maxrss``,
+    which a spawned child inherits from the parent it was forked from)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
 def _child(queue, module: str, name: str, kwargs: dict, memory_limit_bytes: int | None) -> None:
+    os.setpgrp()  # its own process group: a time-out ends the child and any pool it started
     if memory_limit_bytes:
         resource.setrlimit(resource.RLIMIT_AS, (memory_limit_bytes, memory_limit_bytes))
     try:
         fn = getattr(importlib.import_module(module), name)
         result = fn(**kwargs)
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-        queue.put({"ok": True, "result": result, "max_rss_bytes": int(peak)})
+        queue.put({"ok": True, "result": result, "max_rss_bytes": peak_rss_bytes()})
     except BaseException as exc:  # noqa: BLE001 - reported to the parent
         queue.put({"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()})
 
@@ -40,11 +55,11 @@ def run_isolated(module: str, name: str, kwargs: dict | None = None, timeout_s: 
     dict
         ``ok`` (bool), ``result`` (what the function returned) or ``error``,
         ``timed_out`` (bool), ``wall_s`` (child wall time, start-up included) and
-        ``max_rss_bytes`` (the child's resident peak).
+        ``max_rss_bytes`` (the child's resident peak, ``VmHWM``).
     """
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(queue, module, name, kwargs or {}, memory_limit_bytes), daemon=True)
+    proc = ctx.Process(target=_child, args=(queue, module, name, kwargs or {}, memory_limit_bytes), daemon=False)
     t0 = time.perf_counter()
     proc.start()
     out = None
@@ -54,13 +69,20 @@ def run_isolated(module: str, name: str, kwargs: dict | None = None, timeout_s: 
         out = None
     wall = time.perf_counter() - t0
     if out is None:
-        proc.kill()
-        proc.join(5)
+        _kill_group(proc)
         return {"ok": False, "timed_out": True, "error": f"did not finish within {timeout_s:g} s", "wall_s": wall}
     proc.join(30)
     if proc.is_alive():  # pragma: no cover - the child sent its result and hangs on exit
-        proc.kill()
-        proc.join(5)
+        _kill_group(proc)
     out["timed_out"] = False
     out["wall_s"] = wall
     return out
+
+
+def _kill_group(proc) -> None:
+    """End the child and the processes it started (its own process group), by its id."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        proc.kill()
+    proc.join(5)

@@ -22,7 +22,10 @@ the ratio of medians is reported. Scene loading is excluded for both.
 Agreement: paths are matched by interaction sequence and vertices
 (:func:`wavepaths.validation.compare.compare_paths`, 2 cm); the report gives how many
 of Sionna's paths wavepaths also finds, how many each finds alone, and the delay and
-|a| differences of the matched ones.
+|a| differences of the matched ones. A Sionna path without a match is explained as in
+the validation report: either a topology rule (it diffracts on an edge with three or
+more faces and leaves its topological volume, seed §3.1, which wavepaths rejects on
+purpose) or a failure of wavepaths.
 """
 
 from __future__ import annotations
@@ -126,11 +129,17 @@ def _sionna(bench: BenchScene, max_depth: int, samples: int):
                             samples_per_src=samples, max_num_paths_per_src=1_000_000)
 
 
-def _agreement(paths, a, sn) -> dict:
+def _agreement(xml: str, paths, a, sn) -> dict:
+    """Path-by-path comparison; each Sionna-only path gets the validation report's reason."""
+    from ..scene import load_scene
     from ..validation.compare import compare_paths
+    from ..validation.report import SIONNA_ONLY_FAILURE, _explain_sionna_only
 
-    comp = compare_paths(paths, a, sn)
+    scene = load_scene(xml)
+    comp = compare_paths(paths, a, sn, explain=lambda side, i: _explain_sionna_only(scene, sn, i)
+                         if side == "sionna" else "")
     s = comp.summary()
+    failures = sum(1 for x in comp.only_sionna if x["reason"] == SIONNA_ONLY_FAILURE)
     only_sn = Counter(x["kinds"] for x in comp.only_sionna)
     only_wp = Counter(x["kinds"] for x in comp.only_wavepaths)
     return {
@@ -140,6 +149,8 @@ def _agreement(paths, a, sn) -> dict:
         "sionna_paths_found_fraction": s["matched"] / sn.num_paths if sn.num_paths else 1.0,
         "only_wavepaths": s["only_wavepaths"],
         "only_sionna": s["only_sionna"],
+        "only_sionna_not_found_by_wavepaths": failures,
+        "only_sionna_reasons": s["only_sionna_reasons"],
         "only_sionna_by_kind": dict(sorted(only_sn.items())),
         "only_wavepaths_by_kind": dict(sorted(only_wp.items())),
         "only_sionna_examples": comp.only_sionna[:10],
@@ -211,12 +222,12 @@ def run_scene(bench: BenchScene, rounds: int = 3, repeats: int = 3, max_depth: i
                         "num_paths": paths_res["num_paths"], "kinds": paths_res["kinds"],
                         "scene": paths_res["scene"], "stats": paths_res["stats"]}
     out["time_ratio"] = out["sionna"]["median_s"] / out["wavepaths"]["median_s"]
-    out["agreement"] = _agreement(paths_res["paths"], paths_res["a"], sn)
+    out["agreement"] = _agreement(bench.xml, paths_res["paths"], paths_res["a"], sn)
     return out
 
 
 def run_sionna_paths_bench(out_dir: str, quick: bool = False, rounds: int = 3, repeats: int = 3,
-                           large_timeout_s: float = 900.0, progress=print) -> dict:
+                           large_timeout_s: float = 600.0, progress=print) -> dict:
     """Benchmark 2: ``simple_street_canyon`` and the larger ``etoile_crop``.
 
     ``quick``: the street canyon only, one round.

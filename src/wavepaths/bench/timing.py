@@ -5,14 +5,14 @@ measured in one run, the contenders interleaved round by round, and reported as 
 median over rounds (with the spread). Peak memory is measured in a separate run with
 ``tracemalloc`` (numpy reports its buffers to it), so that tracing does not slow the
 timed runs; memory held by Embree's BVH and by Dr.Jit is not seen by it, and the
-process's resident peak (``ru_maxrss``) is reported beside it.
+resident peak of the child process that ran the step
+(:func:`wavepaths.bench.isolated.peak_rss_bytes`) is reported beside it.
 """
 
 from __future__ import annotations
 
 import gc
 import os
-import resource
 import statistics
 import time
 import tracemalloc
@@ -64,14 +64,6 @@ def interleaved(contenders: dict[str, Callable[[], object]], rounds: int) -> dic
     return out
 
 
-def timed(fn: Callable[[], object]) -> tuple[object, float]:
-    """(result, wall time [s]) of one call."""
-    gc.collect()
-    t0 = time.perf_counter()
-    result = fn()
-    return result, time.perf_counter() - t0
-
-
 def peak_python_memory(fn: Callable[[], object]) -> tuple[object, int]:
     """(result, peak bytes allocated through Python and numpy during ``fn``)."""
     gc.collect()
@@ -87,11 +79,6 @@ def peak_python_memory(fn: Callable[[], object]) -> tuple[object, int]:
         if not was:
             tracemalloc.stop()
     return result, int(peak)
-
-
-def max_rss_bytes() -> int:
-    """Peak resident memory of this process so far [bytes] (Linux reports KiB)."""
-    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
 def load_average() -> list[float]:

@@ -27,7 +27,40 @@ if TYPE_CHECKING:  # pragma: no cover
 CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~100 MB)
 
 
-def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None) -> np.ndarray:
+def _lift_reflections(scene: "Scene", verts: np.ndarray, polys: np.ndarray, first: int) -> None:
+    """Move reflection points (vertices ``first .. first + k - 1``) off their planes, in place.
+
+    Both legs of a reflection lie on one side of the mirror: the point is lifted toward that
+    side by ``2 ray_offset``, so that a leg grazing the mirror does not hit it in float32.
+    """
+    lift = 2 * scene.length_tolerance(scene.tolerances.ray_offset)
+    for j in range(polys.shape[1]):
+        v = first + j
+        n = scene.polygon_normal[polys[:, j]]
+        side = np.sign(np.einsum("ij,ij->i", verts[:, v - 1] - verts[:, v], n))
+        verts[:, v] += (lift * side)[:, None] * n
+
+
+def _lift_diffraction(scene: "Scene", points: np.ndarray, dihedron: np.ndarray, face_0: np.ndarray,
+                      face_n: np.ndarray) -> np.ndarray:
+    """Diffraction points moved off their edge along the bisector of the true dihedron's sector.
+
+    The legs leave the edge inside that sector, possibly grazing one of its faces; starting
+    them ``2 ray_offset`` inside the sector keeps float32 casts from hitting those faces.
+    """
+    dih = scene.dihedra
+    w = dih.direction[dihedron]
+    x = dih.face_direction[face_0]
+    y = np.cross(w, x)
+    pn = dih.face_direction[face_n]
+    ang = np.mod(np.arctan2(np.einsum("ij,ij->i", pn, y), np.einsum("ij,ij->i", pn, x)), 2 * np.pi)
+    ang = np.where(ang < 1e-9, 2 * np.pi, ang)
+    bis = np.cos(ang / 2)[:, None] * x + np.sin(ang / 2)[:, None] * y
+    return points + 2 * scene.length_tolerance(scene.tolerances.ray_offset) * bis
+
+
+def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None,
+                     cast: np.ndarray | None = None) -> np.ndarray:
     """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked.
 
     A chain with a degenerate segment (shorter than the weld tolerance: two interactions
@@ -40,8 +73,9 @@ def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact
     # sit as close to a surface as it likes
     inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))
     degenerate = (inner <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
-    a = vertices[:, :-1].reshape(-1, 3)
-    b = vertices[:, 1:].reshape(-1, 3)
+    cv = vertices if cast is None else cast  # the vertices to cast from (interaction points lifted)
+    a = cv[:, :-1].reshape(-1, 3)
+    b = cv[:, 1:].reshape(-1, 3)
     blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)
     stats["rays_cast"] += a.shape[0]
     if exact is not None and exact.any():
@@ -115,7 +149,9 @@ def reflection_tile(
         stats[f"{tag}_rejected_outside_polygon"] += rej["outside_polygon"]
         ri, ci = ri[ok], ci[ok]
         verts = np.concatenate([lv.images[ci, :1], pts, rx[ri][:, None, :]], axis=1)
-        blocked = _occluded_chains(scene, verts, stats, grazing[lv.source[ci], ri])
+        cast = verts.copy()
+        _lift_reflections(scene, cast, lv.polygons[ci], 1)
+        blocked = _occluded_chains(scene, verts, stats, grazing[lv.source[ci], ri], cast)
         stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
         keep = ~blocked
         ri, ci, verts = ri[keep], ci[keep], verts[keep]
@@ -293,7 +329,11 @@ def diffraction_tile(
         post_polys = rx_lv.polygons[e][:, ::-1]
         rx_pos = rx[rx_lv.source[e]]
         verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
-        blocked = _occluded_chains(scene, verts, stats)
+        cast = verts.copy()
+        _lift_reflections(scene, cast, tx_lv.polygons[c], 1)
+        cast[:, a + 1] = _lift_diffraction(scene, P, d, f0, fn)
+        _lift_reflections(scene, cast, post_polys, a + 2)
+        blocked = _occluded_chains(scene, verts, stats, None, cast)
         stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
         keep = ~blocked
         e, d, c, f0, fn, verts, post_polys = e[keep], d[keep], c[keep], f0[keep], fn[keep], verts[keep], post_polys[keep]

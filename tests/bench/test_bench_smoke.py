@@ -1,0 +1,57 @@
+"""Smoke test of the benchmark package: tiny sizes, no timings checked.
+
+Checks that benchmark 1 runs, that the closed form and every numerical search find the
+same diffraction points (to 1e-9 m) and the same on-edge verdicts, and that
+``run_bench`` writes ``bench.json`` with the headline keys.
+"""
+
+import json
+
+import numpy as np
+
+from wavepaths.bench.point_search import (
+    closed_form,
+    closed_form_scalar,
+    newton_3d,
+    newton_reduced,
+    newton_scalar,
+    random_instances,
+    run_point_search,
+)
+from wavepaths.bench.report import run_bench
+
+
+def test_closed_form_and_numerical_search_agree():
+    inst = random_instances(500, seed=3)
+    t, on = closed_form(inst)
+    assert 0.2 < on.mean() < 0.9
+    for search in (newton_3d, newton_reduced):
+        tn, onn, _ = search(inst)
+        assert (onn == on).all()
+        assert np.abs(tn[on] - t[on]).max() < 1e-9
+    for i in range(50):
+        args = (inst.e[i], inst.r[i], inst.origin[i], inst.direction[i], inst.length[i])
+        ts, ons = closed_form_scalar(*args)
+        assert ons == on[i]
+        if ons:
+            assert abs(ts - t[i]) < 1e-9
+            assert abs(newton_scalar(*args)[0] - t[i]) < 1e-9
+
+
+def test_point_search_benchmark_figures():
+    r = run_point_search(n_pairs=200, repeats=2, rounds=2, numerical_repeats=2, scalar_pairs=20)
+    for key in ("point_search_ns", "point_search_speedup", "point_search_max_point_distance_m", "methods"):
+        assert key in r
+    assert r["point_search_max_point_distance_m"] < 1e-9
+    assert r["methods"]["newton"]["agreement_with_closed_form"]["on_edge_disagreements"] == 0
+    assert r["point_search_ns"] > 0 and r["point_search_speedup"] > 0
+
+
+def test_run_bench_writes_json(tmp_path):
+    summary = run_bench(str(tmp_path), quick=True, only=["point_search"], profile=False, progress=lambda m: None)
+    data = json.loads((tmp_path / "bench.json").read_text())
+    for key in ("point_search_ns", "point_search_speedup", "sionna_paths_time_ratio", "diffraction_cost_ratio",
+                "tradeoff_points", "machine", "targets"):
+        assert key in data
+    assert (tmp_path / "index.html").exists()
+    assert summary["headline"]["point_search_ns"] == data["point_search_ns"]
