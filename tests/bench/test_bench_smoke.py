@@ -55,3 +55,17 @@ def test_run_bench_writes_json(tmp_path):
         assert key in data
     assert (tmp_path / "index.html").exists()
     assert summary["headline"]["point_search_ns"] == data["point_search_ns"]
+
+
+def test_console_script_has_bench():
+    import shutil
+    import subprocess
+
+    exe = shutil.which("wavepaths")
+    if exe is None:  # pragma: no cover - the package is not installed as a script here
+        import pytest
+
+        pytest.skip("the wavepaths console script is not installed")
+    out = subprocess.run([exe, "bench", "--help"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0
+    assert "--quick" in out.stdout and "--munich" in out.stdout

@@ -300,8 +300,9 @@ interleaved round by round, and reported as medians over the rounds.</p>
     if ps:
         parts.append("<h2>1. Diffraction point search (seed §4, fig. 7)</h2>")
         parts.append(f"<p>{ps['n_pairs']:,} random pairs E, R and edges AB (all in a 20 m cube; "
-                     f"{ps['fraction_on_edge']:.0%} have their point on the segment), solved {ps['repeats']:,} times "
-                     f"by each method as numpy arrays, in {ps['rounds']} interleaved rounds. The seed: "
+                     f"{ps['fraction_on_edge']:.0%} have their point on the segment), solved over all pairs at once as numpy "
+                     f"arrays, the closed form {ps['methods']['closed_form']['calls']:,} times and each numerical search "
+                     f"{ps['methods'][ps['fastest_numerical']]['calls']:,} times, in {ps['rounds']} interleaved rounds. The seed: "
                      f"{ps['seed']['ns_per_point']:.0f} ns per point, {ps['seed']['speedup'][0]}-{ps['seed']['speedup'][1]}x "
                      f"faster than the numerical search, on {html.escape(ps['seed']['hardware'])}.</p>")
         rows = []
