@@ -124,3 +124,48 @@ def test_wedge_angles_are_utd_angles(n):
     f = d.face_direction
     np.testing.assert_allclose(f[res.face_0[0]], [1, 0, 0], atol=1e-12)
     np.testing.assert_allclose(f[res.face_n[0]], [np.cos(n * np.pi), np.sin(n * np.pi), 0], atol=1e-12)
+
+
+def test_same_sector_is_find_dihedron_anywhere_on_the_edge(rng):
+    """The engine replaces FindDihedron at P by one sector lookup per end (a sector is a
+    prism around the edge line): same verdict, same true dihedron, same UTD angles, for
+    diffraction points anywhere along the edge and ends far from it."""
+    from wavepaths.topology.sectors import sector_angle, sector_table
+
+    sets, ae, ar = [], [], []
+    for _ in range(3000):
+        k = rng.integers(1, 6)
+        sets.append(rng.uniform(0, 2 * np.pi, k))
+        ae.append(rng.uniform(0, 2 * np.pi))
+        ar.append(rng.uniform(0, 2 * np.pi))
+    d = synthetic_dihedra(sets)
+    n = len(sets)
+    ae, ar = np.array(ae), np.array(ar)
+    def ends(angle):  # distance to the edge 0.1-50 m, anywhere along it
+        pts = np.zeros((n, 3))
+        pts[:, :2] = rng.uniform(0.1, 50, n)[:, None] * np.stack([np.cos(angle), np.sin(angle)], 1)
+        pts[:, 2] = rng.uniform(-40, 40, n)
+        return pts
+
+    e, r = ends(ae), ends(ar)
+    p = np.zeros((n, 3))
+    p[:, 2] = rng.uniform(-1, 1, n)  # the point on the edge: FindDihedron's P
+    idx = np.arange(n)
+    ref = find_dihedron(d, idx, p, e, r)
+    tab = sector_table(d)
+    se, _, phi_e = sector_angle(tab, idx, e, d.origin)
+    sr, _, phi_r = sector_angle(tab, idx, r, d.origin)
+    # away from faces (the sector lookup's 1e-7 rad margin), the verdicts are the same
+    clear = (se >= 0) & (sr >= 0)
+    assert clear.mean() > 0.99
+    same = clear & (se == sr)
+    np.testing.assert_array_equal(same[clear], ref.valid[clear])
+    v = same
+    faces, count = tab.face[idx[v]], tab.count[idx[v]]
+    f0 = faces[np.arange(v.sum()), se[v]]
+    fn = faces[np.arange(v.sum()), np.mod(se[v] + 1, count)]
+    np.testing.assert_array_equal(f0, ref.face_0[v])
+    np.testing.assert_array_equal(fn, ref.face_n[v])
+    np.testing.assert_allclose(phi_e[v], ref.phi_prime[v], atol=1e-12)
+    np.testing.assert_allclose(phi_r[v], ref.phi[v], atol=1e-12)
+    np.testing.assert_allclose(tab.width[idx[v], se[v]], ref.wedge_angle[v], atol=1e-12)

@@ -134,6 +134,13 @@ class Scene:
         return build_dihedra(self)
 
     @functools.cached_property
+    def polygon_spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding spheres of the polygons: centres (p, 3) and radii (p,) [m] (beam tests)."""
+        from ..search.images import polygon_spheres
+
+        return polygon_spheres(self)
+
+    @functools.cached_property
     def raycaster(self) -> "RayCaster":
         """Batched segment-occlusion queries (Embree, float32 on recentred coordinates)."""
         from ..raycast import default_raycaster

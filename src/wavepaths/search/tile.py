@@ -2,7 +2,7 @@
 
 Every function here takes the scene, a :class:`~wavepaths.search.context.TxContext`
 and a tile of receivers, builds the candidate arrays, applies the tests in order of
-cost (segment parameter, point-in-polygon, FindDihedron, occlusion), compacting the
+cost (sectors, segment parameter, point-in-polygon, occlusion), compacting the
 survivors after each test, and casts the surviving segments in one batch. Each test
 adds to the ``stats`` counters what it rejected.
 """
@@ -10,14 +10,13 @@ adds to the ``stats`` counters what it rejected.
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..topology.find_dihedron import find_dihedron
-from ..topology.sectors import sector_of
+from ..topology.sectors import FACE_ANGLE_TOL
 from .context import TxContext
-from .geometry import diffraction_point_parameter
 from .images import ImageLevel, backtrace, build_image_levels
 from .paths import InteractionType, PathBatch
 
@@ -73,9 +72,16 @@ def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact
     # sit as close to a surface as it likes
     inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))
     degenerate = (inner <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
-    cv = vertices if cast is None else cast  # the vertices to cast from (interaction points lifted)
-    a = cv[:, :-1].reshape(-1, 3)
-    b = cv[:, 1:].reshape(-1, 3)
+    if s > 2:
+        # ... but one exactly on the face or edge it would interact with (within the casters'
+        # plane tolerance, i.e. rounding) takes part in no interaction there (docs/search.md)
+        from ..raycast import plane_tolerance
+
+        degenerate |= (seg[:, [0, -1]] <= plane_tolerance(scene)).any(axis=1)
+    # the true vertices: by the casters' rule (wavepaths.raycast) an end on a surface does not
+    # hit it, and a face next to it still blocks (``cast``, a lifted copy, is not used)
+    a = vertices[:, :-1].reshape(-1, 3)
+    b = vertices[:, 1:].reshape(-1, 3)
     blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)
     stats["rays_cast"] += a.shape[0]
     if exact is not None and exact.any():
@@ -213,34 +219,162 @@ def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.
     return DiffractionSources(chain, dih, key, uk, start.astype(np.int64), count.astype(np.int64))
 
 
-def _join(src, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each receiver-side key, all transmitter-side sources with the same key.
+def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
+    """For each receiver-side key, all transmitter-side sources with the same key, in chunks.
 
-    Returns the receiver-side row and the transmitter-side row of every match.
+    Yields ``(rows, src_rows)``: the receiver-side row and the transmitter-side row of every
+    match, at most about ``budget`` matches per chunk (a single key with more matches than
+    that comes in one chunk of its own), so that memory stays bounded however many image
+    sources share a (dihedron, sector).
     """
-    pos = np.searchsorted(src.unique_keys, keys)
-    pos = np.clip(pos, 0, max(len(src.unique_keys) - 1, 0))
-    hit = len(src.unique_keys) > 0
-    match = (src.unique_keys[pos] == keys) if hit else np.zeros(len(keys), bool)
-    count = np.where(match, src.key_count[pos] if hit else 0, 0)
-    rows = np.repeat(np.arange(len(keys)), count)
-    start = np.repeat(np.where(match, src.key_start[pos] if hit else 0, 0), count)
-    offs = np.arange(len(rows)) - np.repeat(np.cumsum(count) - count, count)
-    return rows, start + offs
+    nu = len(src.unique_keys)
+    if nu == 0 or len(keys) == 0:
+        return
+    pos = np.minimum(np.searchsorted(src.unique_keys, keys), nu - 1)
+    match = src.unique_keys[pos] == keys
+    count = np.where(match, src.key_count[pos], 0)
+    first = np.where(match, src.key_start[pos], 0)
+    ends = np.cumsum(count)
+    total = int(ends[-1])
+    lo = 0
+    while lo < len(keys):
+        base = int(ends[lo] - count[lo])
+        if base >= total:
+            return
+        hi = max(int(np.searchsorted(ends, base + budget, side="right")), lo + 1)
+        c = count[lo:hi]
+        rows = np.repeat(np.arange(lo, hi), c)
+        offs = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+        yield rows, np.repeat(first[lo:hi], c) + offs
+        lo = hi
 
 
-def _near_boundary(scene: "Scene", test, P: np.ndarray, E: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Candidates whose geometrical-optics ray passes within the float32 uncertainty of the edge.
+@dataclass(frozen=True)
+class _EndSide:
+    """One end of the diffracted path (image of order a or b), projected on edges.
 
-    The angular distance to the incident shadow boundary (``|phi - phi'| = pi``) or to a
-    reflection boundary (``phi + phi' = pi`` or ``(2n - 1) pi``), times the shorter leg,
-    approximates how close the corresponding GO ray passes to the edge.
+    Per row: the edge's ``dihedron`` and ``sector`` (around the edge line), the UTD angle
+    ``phi`` from the sector's first face, and the end point's coordinate along the edge
+    ``t`` [m from the edge origin] and distance to the edge line ``rho`` [m]. These are
+    the seed's ``t_e, d_e`` (or ``t_r, d_r``) of §2.3: with them the diffraction point of
+    any (E, R) pair is a scalar formula, so the 3-D work is done once per (end, edge).
     """
-    delta = 4 * scene.length_tolerance(scene.tolerances.ray_offset)
-    phi, pp, wedge = test.phi, test.phi_prime, test.wedge_angle
-    leg = np.minimum(np.linalg.norm(E - P, axis=1), np.linalg.norm(R - P, axis=1))
-    offs = np.stack([np.abs(phi - pp) - np.pi, phi + pp - np.pi, phi + pp - (2 * wedge - np.pi)], axis=1)
-    return (np.abs(offs).min(axis=1) * leg) < delta
+
+    row: np.ndarray
+    dihedron: np.ndarray
+    sector: np.ndarray
+    phi: np.ndarray
+    t: np.ndarray
+    rho: np.ndarray
+
+
+def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray, tol: float = FACE_ANGLE_TOL):
+    """Sector, width and angle-in-sector of edge-frame coordinates ``(x, y)`` around edges ``d``.
+
+    ``d`` has shape (k,) and ``x``, ``y`` shape (k,) or (e, k) (dense receiver side: the
+    edge tables broadcast, nothing is gathered per pair). Same decisions as
+    :func:`~wavepaths.topology.sectors.sector_angle`: within ``tol`` of a bounding face,
+    or on the edge line, the sector is -1.
+    """
+    tab = ctx.sectors
+    theta = np.arctan2(y, x)
+    theta += np.where(theta < 0, 2 * np.pi, 0.0)
+    ang = tab.angles[d]  # (k, m), broadcast against theta's leading axes
+    below = np.zeros(theta.shape, dtype=np.int64)
+    for j in range(ang.shape[1]):  # m <= a few faces: a loop over slots, not over pairs
+        below += ang[:, j] <= theta
+    sec = np.mod(below - 1, tab.count[d])
+    cols = np.arange(len(d))
+    start = ang[cols, sec] if theta.ndim == 1 else ang[cols[None, :], sec]
+    width = tab.width[d][cols, sec] if theta.ndim == 1 else tab.width[d][cols[None, :], sec]
+    phi = theta - start
+    phi += np.where(phi < 0, 2 * np.pi, 0.0)
+    on_face = (phi < tol) | (width - phi < tol) | ((x == 0) & (y == 0))
+    return np.where(on_face, -1, sec), np.where(on_face, 0.0, width), phi
+
+
+def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
+                   stats: Counter, tag: str) -> _EndSide:
+    """Step 1 of :func:`diffraction_tile`, dense over (receiver images ``e_rows``) x (dihedra ``diffr``).
+
+    Every quantity is an outer product of a per-image and a per-edge vector (matrix
+    products on coordinates recentred on the scene centre, so that float64 keeps the
+    scene's resolution at any offset), so nothing is gathered per pair. Tests:
+
+    * for ``b >= 1``, *mirror side*: the edge must have a point on the real side of the
+      image's last mirror ``q`` (the leg from the diffraction point to the last image
+      must cross ``q``'s plane, image method); both edge ends beyond the plane (within
+      the plane tolerance) drop the pair;
+    * for ``b >= 1``, *beam*: the reflection point on ``q`` lies on the ray from the
+      image toward the diffraction point, so the directions from the image to ``q``'s
+      bounding sphere and to the edge's bounding sphere must overlap (the bounding-sphere
+      beam of :mod:`wavepaths.search.images`; conservative);
+    * the sector: not on a face, and wider than pi.
+    """
+    dihedra, tab = scene.dihedra, ctx.sectors
+    c0 = scene.center
+    I = rx_lv.last[e_rows] - c0  # (E, 3)
+    A = dihedra.origin[diffr] - c0  # (D, 3)
+    w = dihedra.direction[diffr]
+    L = dihedra.length[diffr]
+    ok = np.ones((len(e_rows), len(diffr)), dtype=bool)
+    if rx_lv.order >= 1:
+        q = rx_lv.polygons[e_rows, -1]
+        n, off = scene.polygon_normal[q], scene.polygon_offset[q] - scene.polygon_normal[q] @ c0
+        side = np.sign(np.einsum("ij,ij->i", rx_lv.images[e_rows, -2] - c0, n) - off)
+        tol = scene.length_tolerance(scene.tolerances.plane_distance)
+        sa = side[:, None] * (n @ A.T - off[:, None])
+        sb = side[:, None] * (n @ (A + L[:, None] * w).T - off[:, None])
+        reach = np.maximum(sa, sb) > -tol
+        stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += int((~reach).sum())
+        ok &= reach
+        centre, radius = scene.polygon_spheres
+        to_q = centre[q] - c0 - I  # (E, 3)
+        dist_q = np.linalg.norm(to_q, axis=1)
+        M = A + 0.5 * L[:, None] * w  # edge midpoints (D, 3)
+        h = 0.5 * L
+        im = I @ M.T  # (E, D)
+        dist_m = np.sqrt(np.maximum((I * I).sum(1)[:, None] - 2 * im + (M * M).sum(1)[None, :], 0.0))
+        cos = (to_q @ M.T - (to_q * I).sum(1)[:, None]) / np.maximum(dist_q[:, None] * dist_m, 1e-300)
+        half_q = np.arcsin(np.clip(radius[q] / np.maximum(dist_q, 1e-300), 0, 1))
+        half_m = np.arcsin(np.clip(h[None, :] / np.maximum(dist_m, 1e-300), 0, 1))
+        beam = (np.arccos(np.clip(cos, -1, 1)) <= half_q[:, None] + half_m + 1e-9)
+        beam |= (dist_q <= radius[q])[:, None] | (dist_m <= h[None, :])
+        stats[f"{tag}_receiver_pairs_rejected_beam"] += int((ok & ~beam).sum())
+        ok &= beam
+    xh, yh = tab.x_hat[diffr], tab.y_hat[diffr]
+    x = I @ xh.T - (A * xh).sum(1)[None, :]
+    y = I @ yh.T - (A * yh).sum(1)[None, :]
+    sec, width, phi = _sector_in_table(ctx, diffr, x, y)
+    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((ok & ~good).sum())
+    ok &= good
+    ie, idd = np.nonzero(ok)
+    e, d, sec = e_rows[ie], diffr[idd], sec[ie, idd]
+    # the kept pairs' coordinates again, from R - A per pair: the dense products above lose
+    # digits relative to a small distance to the edge line (an end point almost on it)
+    x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
+    phi = np.arctan2(y, x) - ctx.sectors.angles[d, sec]
+    phi = np.mod(phi, 2 * np.pi)
+    return _EndSide(e, d, sec, phi, t, np.hypot(x, y))
+
+
+def _edge_frame(scene: "Scene", ctx: TxContext, points: np.ndarray, d: np.ndarray):
+    """Coordinates of ``points`` (k, 3) in the frame of edges ``d`` (k,): ``x``, ``y`` in the
+    plane perpendicular to the edge (``x`` along its first face), ``t`` along it [m]."""
+    v = points - scene.dihedra.origin[d]
+    x = np.einsum("ij,ij->i", v, ctx.sectors.x_hat[d])
+    y = np.einsum("ij,ij->i", v, ctx.sectors.y_hat[d])
+    t = np.einsum("ij,ij->i", v, scene.dihedra.direction[d])
+    return x, y, t
+
+
+def _transmitter_side(scene: "Scene", ctx: TxContext, tx_lv: ImageLevel, src) -> _EndSide:
+    """Projections of the transmitter-side sources (image, dihedron) on their edges (see :class:`_EndSide`)."""
+    d = src.dihedron
+    x, y, t = _edge_frame(scene, ctx, tx_lv.last[src.chain], d)
+    sec, _, phi = _sector_in_table(ctx, d, x, y)
+    return _EndSide(src.chain, d, sec, phi, t, np.hypot(x, y))
 
 
 def diffraction_tile(
@@ -261,10 +395,20 @@ def diffraction_tile(
     optics paths of those pairs are then cast in float64, so that the UTD field, whose
     boundary terms switch by the float64 angles, stays continuous.
 
-    The diffraction point is found in closed form (seed §2.3) between the transmitter's
-    image of order ``a`` and the receiver's image of order ``b``; FindDihedron (seed
-    §3.3) checks that the path stays in one topological volume; the reflection points on
-    both sides follow by the image method.
+    Order of the tests, cheapest and most selective first:
+
+    1. per (receiver image, dihedron), dense: the mirror side and beam of the image's
+       last mirror, the sector around the edge (:func:`_receiver_side`);
+    2. the join with the transmitter side on (dihedron, sector): FindDihedron (seed
+       §3.3) accepts E-P-R exactly when E and R lie in the same sector of the edge (a
+       sector is a prism around the edge line), whose bounding faces are the true
+       dihedron, so the join *is* the seed's test, evaluated once per end, not per path
+       (:func:`~wavepaths.topology.sectors.sector_angle`; tests/search check it against
+       :func:`~wavepaths.topology.find_dihedron.find_dihedron`);
+    3. the closed-form diffraction point (seed §2.3) in the reduced coordinates of the
+       two ends, ``t = (t_e d_r + t_r d_e) / (d_e + d_r)``, on the edge segment;
+    4. the reflection points on both sides by the image method (back-traces);
+    5. occlusion of every leg, cast in one batch.
     """
     dihedra = scene.dihedra
     tx_lv = ctx.levels[a]
@@ -274,7 +418,8 @@ def diffraction_tile(
     if len(rx_lv) == 0 or len(ctx.diffraction_sources[a].chain) == 0:
         return out
     src_all = ctx.diffraction_sources[a]
-    step = max(1, CANDIDATE_BUDGET // max(len(np.unique(src_all.dihedron)), 1))
+    m = int(ctx.sectors.angles.shape[1])
+    step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * (m + 4)))
     for s in range(0, len(rx_lv), step):
         e_rows = np.arange(s, min(len(rx_lv), s + step))
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
@@ -284,71 +429,84 @@ def diffraction_tile(
         diffr = np.unique(src.dihedron)
         if len(diffr) == 0:
             continue
-        e = np.repeat(e_rows, len(diffr))
-        d = np.tile(diffr, len(e_rows))
-        sec, width = sector_of(ctx.sectors, d, rx_lv.last[e], dihedra.origin[d])
-        keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-        stats[f"{tag}_receiver_pairs"] += len(e)
-        stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~keep).sum())
-        e, d, sec = e[keep], d[keep], sec[keep]
-        rows, src_rows = _join(src, d * ctx.key_stride + sec)
-        e, d = e[rows], d[rows]
-        c = src.chain[src_rows]
-        stats[f"{tag}_candidates"] += len(e)
-        if len(e) == 0:
-            continue
-        # closed-form point on the edge line, then on the segment
-        E = tx_lv.last[c]
-        R = rx_lv.last[e]
-        t = diffraction_point_parameter(E, R, dihedra.origin[d], dihedra.direction[d])
-        on = (t >= 0) & (t <= dihedra.length[d])
-        stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
-        e, d, c, E, R, t = e[on], d[on], c[on], E[on], R[on], t[on]
-        P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
-        # FindDihedron: one topological volume, and the true dihedron's faces
-        test = find_dihedron(dihedra, d, P, E, R)
-        ok = test.valid
-        stats[f"{tag}_rejected_find_dihedron"] += int((~ok).sum())
-        if not ctx.options.lit_region:
-            shadow = np.abs(test.phi - test.phi_prime) > np.pi
-            stats[f"{tag}_rejected_lit_region"] += int((ok & ~shadow).sum())
-            ok &= shadow
-        near = _near_boundary(scene, test, P, E, R) & ok
-        if near.any():
-            grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
-            stats["pairs_on_boundaries"] += int(near.sum())
-        e, d, c, P, f0, fn = e[ok], d[ok], c[ok], P[ok], test.face_0[ok], test.face_n[ok]
-        # reflections before (transmitter images) and after (receiver images)
-        ok1, pre, rej1 = backtrace(scene, P, tx_lv, c)
-        e, d, c, P, f0, fn = e[ok1], d[ok1], c[ok1], P[ok1], f0[ok1], fn[ok1]
-        ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
-        e, d, c, P, f0, fn, pre = e[ok2], d[ok2], c[ok2], P[ok2], f0[ok2], fn[ok2], pre[ok2]
-        stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
-        stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
-        post = post[:, ::-1]  # path order after the diffraction
-        post_polys = rx_lv.polygons[e][:, ::-1]
-        rx_pos = rx[rx_lv.source[e]]
-        verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
-        cast = verts.copy()
-        _lift_reflections(scene, cast, tx_lv.polygons[c], 1)
-        cast[:, a + 1] = _lift_diffraction(scene, P, d, f0, fn)
-        _lift_reflections(scene, cast, post_polys, a + 2)
-        blocked = _occluded_chains(scene, verts, stats, None, cast)
-        stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
-        keep = ~blocked
-        e, d, c, f0, fn, verts, post_polys = e[keep], d[keep], c[keep], f0[keep], fn[keep], verts[keep], post_polys[keep]
-        k = len(e)
-        kinds = np.full((k, a + 1 + b), InteractionType.REFLECTION, np.int8)
-        kinds[:, a] = InteractionType.DIFFRACTION
-        prims = np.concatenate([tx_lv.polygons[c], d[:, None], post_polys], axis=1)
-        tris = np.concatenate(
-            [_triangle_of(scene, tx_lv.polygons[c]), dihedra.face_triangle[f0][:, None], _triangle_of(scene, post_polys)],
-            axis=1,
-        )
-        out.append(
-            PathBatch(tx_lv.source[c], rx_lv.source[e] + rx_offset, kinds, prims, tris, np.stack([f0, fn], axis=1), verts)
-        )
+        stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
+        rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag)
+        tside = _transmitter_side(scene, ctx, tx_lv, src)
+        for rows, src_rows in _join_chunks(src, rside.dihedron * ctx.key_stride + rside.sector):
+            out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
+                                           rside, rows, tside, src_rows)
     return out
+
+
+def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
+                            rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray) -> list[PathBatch]:
+    """Steps 3-5 of :func:`diffraction_tile` on joined candidates (receiver side ``rside[rows]``,
+    transmitter side ``tside[src_rows]``)."""
+    dihedra = scene.dihedra
+    tx_lv = ctx.levels[a]
+    stats[f"{tag}_candidates"] += len(rows)
+    if len(rows) == 0:
+        return []
+    # closed-form point in the reduced coordinates (seed §2.3), then on the segment
+    d = rside.dihedron[rows]
+    te, de = tside.t[src_rows], tside.rho[src_rows]
+    tr, dr = rside.t[rows], rside.rho[rows]
+    den = de + dr
+    t = np.where(den > 0, (te * dr + tr * de) / np.where(den > 0, den, 1.0), 0.5 * (te + tr))
+    on = (t >= 0) & (t <= dihedra.length[d])
+    stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
+    rows, src_rows, d, t = rows[on], src_rows[on], d[on], t[on]
+    phi, phi_prime = rside.phi[rows], tside.phi[src_rows]
+    sec = rside.sector[rows]
+    ok = np.ones(len(rows), dtype=bool)
+    if not ctx.options.lit_region:
+        shadow = np.abs(phi - phi_prime) > np.pi
+        stats[f"{tag}_rejected_lit_region"] += int((~shadow).sum())
+        ok &= shadow
+    # GO rays within the float32 uncertainty of the edge: the angular distance to the shadow
+    # or reflection boundary times the shorter leg
+    wedge = ctx.sectors.width[d, sec]
+    leg = np.minimum(np.hypot(te[on] - t, de[on]), np.hypot(tr[on] - t, dr[on]))
+    offs = np.minimum(np.abs(np.abs(phi - phi_prime) - np.pi), np.abs(phi + phi_prime - np.pi))
+    offs = np.minimum(offs, np.abs(phi + phi_prime - (2 * wedge - np.pi)))
+    near = (offs * leg < 4 * scene.length_tolerance(scene.tolerances.ray_offset)) & ok
+    e, c = rside.row[rows], tside.row[src_rows]
+    if near.any():
+        grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
+        stats["pairs_on_boundaries"] += int(near.sum())
+    e, d, sec, c, t = e[ok], d[ok], sec[ok], c[ok], t[ok]
+    P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
+    # reflections after (receiver images) and before (transmitter images)
+    ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
+    e, d, sec, c, P = e[ok2], d[ok2], sec[ok2], c[ok2], P[ok2]
+    ok1, pre, rej1 = backtrace(scene, P, tx_lv, c)
+    e, d, sec, c, P, post = e[ok1], d[ok1], sec[ok1], c[ok1], P[ok1], post[ok1]
+    stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
+    stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
+    # the true dihedron: the faces bounding the sector (seed §3.3)
+    f0 = ctx.sectors.face[d, sec]
+    fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
+    post = post[:, ::-1]  # path order after the diffraction
+    post_polys = rx_lv.polygons[e][:, ::-1]
+    rx_pos = rx[rx_lv.source[e]]
+    verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
+    cast = verts.copy()
+    _lift_reflections(scene, cast, tx_lv.polygons[c], 1)
+    cast[:, a + 1] = _lift_diffraction(scene, P, d, f0, fn)
+    _lift_reflections(scene, cast, post_polys, a + 2)
+    blocked = _occluded_chains(scene, verts, stats, None, cast)
+    stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
+    keep = ~blocked
+    e, d, c, f0, fn, verts, post_polys = e[keep], d[keep], c[keep], f0[keep], fn[keep], verts[keep], post_polys[keep]
+    k = len(e)
+    kinds = np.full((k, a + 1 + b), InteractionType.REFLECTION, np.int8)
+    kinds[:, a] = InteractionType.DIFFRACTION
+    prims = np.concatenate([tx_lv.polygons[c], d[:, None], post_polys], axis=1)
+    tris = np.concatenate(
+        [_triangle_of(scene, tx_lv.polygons[c]), dihedra.face_triangle[f0][:, None], _triangle_of(scene, post_polys)],
+        axis=1,
+    )
+    return [PathBatch(tx_lv.source[c], rx_lv.source[e] + rx_offset, kinds, prims, tris, np.stack([f0, fn], axis=1), verts)]
 
 
 def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 0) -> tuple[list[PathBatch], Counter]:

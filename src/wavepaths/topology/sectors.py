@@ -32,6 +32,10 @@ class SectorTable:
     count : (d,) int64
     width : (d, m) float64
         Width [rad] of the sector starting at ``angles[:, j]`` (counter-clockwise).
+    face : (d, m) int64
+        Index (into the dihedra's face arrays) of the face at ``angles[:, j]``; -1 for padding.
+        The sector starting at slot ``j`` is bounded by ``face[:, j]`` (its ``face_0``, from
+        which the UTD angles are measured) and ``face[:, (j + 1) % count]`` (its ``face_n``).
     """
 
     x_hat: np.ndarray
@@ -39,6 +43,7 @@ class SectorTable:
     angles: np.ndarray
     count: np.ndarray
     width: np.ndarray
+    face: np.ndarray
 
 
 def sector_table(dihedra: Dihedra) -> SectorTable:
@@ -54,7 +59,11 @@ def sector_table(dihedra: Dihedra) -> SectorTable:
     table = np.full((d, m), np.inf)
     slot = np.arange(len(owner)) - dihedra.face_ptr[:-1][owner]
     table[owner, slot] = ang
-    table.sort(axis=1)
+    face = np.full((d, m), -1, dtype=np.int64)
+    face[owner, slot] = np.arange(len(owner))
+    order = np.argsort(table, axis=1, kind="stable")
+    table = np.take_along_axis(table, order, axis=1)
+    face = np.take_along_axis(face, order, axis=1)
     nxt = np.roll(table, -1, axis=1)
     last = count - 1
     rows = np.arange(d)
@@ -62,12 +71,31 @@ def sector_table(dihedra: Dihedra) -> SectorTable:
     finite = np.isfinite(table)
     width = np.zeros_like(table)
     width[finite] = nxt[finite] - table[finite]
-    return SectorTable(x_hat, y_hat, table, count, width)
+    return SectorTable(x_hat, y_hat, table, count, width, face)
 
 
 def sector_of(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, origin: np.ndarray,
               tol: float = FACE_ANGLE_TOL):
     """Sector index and width for ``points`` around ``dihedron`` edges.
+
+    See :func:`sector_angle`, which also returns the angle inside the sector.
+    """
+    sector, width, _ = sector_angle(table, dihedron, points, origin, tol)
+    return sector, width
+
+
+def sector_angle(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, origin: np.ndarray,
+                 tol: float = FACE_ANGLE_TOL):
+    """Sector index, width and angle inside the sector for ``points`` around ``dihedron`` edges.
+
+    A sector is a prism around the whole edge line, so the sector of a point does not
+    depend on where along the edge it is seen from: the seed's FindDihedron (§3.3) at a
+    diffraction point P accepts a path E-P-R exactly when E and R lie in the same
+    sector, and the true dihedron's faces are that sector's two bounding faces
+    (``table.face``). The angle ``phi`` returned here is measured counter-clockwise
+    about the edge from the sector's first face: for E it is the UTD ``phi'``, for R
+    the UTD ``phi`` (both in ``(0, width)``), as :func:`~.find_dihedron.find_dihedron`
+    computes them at P.
 
     Parameters
     ----------
@@ -84,6 +112,8 @@ def sector_of(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, orig
     -------
     sector : (k,) int64
     width : (k,) float64
+    phi : (k,) float64
+        Angle from the sector's first face [rad]; 0 where ``sector`` is -1.
     """
     v = points - origin
     x = np.einsum("ij,ij->i", v, table.x_hat[dihedron])
@@ -97,5 +127,6 @@ def sector_of(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, orig
     near = np.abs(np.where(finite, angles, 0.0) - theta[:, None])
     near = np.where(finite, np.minimum(near, 2 * np.pi - near), np.inf)
     on_face = (near < tol).any(axis=1) | (np.hypot(x, y) == 0)
-    width = table.width[dihedron][rows, sector]
-    return np.where(on_face, -1, sector), np.where(on_face, 0.0, width)
+    width = table.width[dihedron, sector]
+    phi = np.mod(theta - angles[rows, sector], 2 * np.pi)
+    return np.where(on_face, -1, sector), np.where(on_face, 0.0, width), np.where(on_face, 0.0, phi)
