@@ -7,10 +7,14 @@ at under 1.15 us per point on an SGI Origin 200 (R10000, 1999).
 Here both searches run on numpy arrays of all the pairs at once, so that the ratio
 compares algorithms rather than Python loops:
 
-* **closed form**: the engine's own kernel,
+* **closed form**: the seed's formula from the 3-D points E, R, A and w,
   :func:`wavepaths.search.geometry.diffraction_point_parameter`, followed by the
-  on-edge test ``0 <= t <= |AB|`` (the engine does the same in
-  :mod:`wavepaths.search.tile`);
+  on-edge test ``0 <= t <= |AB|``. This is the kernel as the seed timed it (projections
+  and distances of both end points for every pair). The engine's diffraction search
+  (:mod:`wavepaths.search.tile`) no longer calls it: it evaluates the same formula from
+  the reduced coordinates ``(t, d)`` of each end point, computed once per (end point,
+  dihedron) and shared by all the pairs that use them, so its cost per candidate is the
+  last step of this kernel only;
 * **numerical**, the approach the seed replaced: the point of the edge segment AB that
   minimises the path length ``L(t) = |P(t) - E| + |P(t) - R|``, ``P(t) = A + t w``.
   ``L`` is convex, so three variants are timed:
@@ -95,7 +99,7 @@ def random_instances(n: int, seed: int = 0, box: float = 10.0) -> EdgeInstances:
 
 # ---- closed form -------------------------------------------------------------------------
 def closed_form(inst: EdgeInstances) -> tuple[np.ndarray, np.ndarray]:
-    """(t, on_edge): the engine's closed-form point (seed §2.3) and the on-edge test."""
+    """(t, on_edge): the closed-form point from 3-D points (seed §2.3) and the on-edge test."""
     t = diffraction_point_parameter(inst.e, inst.r, inst.origin, inst.direction)
     return t, (t >= 0.0) & (t <= inst.length)
 
@@ -376,9 +380,28 @@ def run_point_search(n_pairs: int = 10_000, repeats: int = 1_000, rounds: int = 
     }
 
 
-# ---- what the kernel could reach ---------------------------------------------------------
+# ---- the kernel against other formulations -----------------------------------------------
+def _closed_form_einsum_norm(e, r, origin, direction, length):
+    """:func:`diffraction_point_parameter` before its rewrite: ``einsum`` projections,
+    ``np.linalg.norm`` distances."""
+    ve = e - origin
+    vr = r - origin
+    te = np.einsum("...j,...j->...", ve, direction)
+    tr = np.einsum("...j,...j->...", vr, direction)
+    de = np.linalg.norm(ve - te[..., None] * direction, axis=-1)
+    dr = np.linalg.norm(vr - tr[..., None] * direction, axis=-1)
+    s = de + dr
+    ok = s > 0
+    t = np.where(ok, (te * dr + tr * de) / np.where(ok, s, 1.0), 0.5 * (te + tr))
+    return t, (t >= 0.0) & (t <= length)
+
+
 def _closed_form_dots(e, r, origin, direction, length):
-    """The closed form with row-wise dot products only (no norm of a projected vector)."""
+    """The closed form with row-wise dot products only, ``d^2 = v.v - (v.w)^2``.
+
+    Cancels when a point is close to the edge line (absolute error of ``d`` about
+    ``eps |v|^2 / d`` instead of ``eps |v|``); timed for comparison only.
+    """
     ve = e - origin
     vr = r - origin
     te = np.einsum("ij,ij->i", ve, direction)
@@ -390,28 +413,29 @@ def _closed_form_dots(e, r, origin, direction, length):
 
 
 def _closed_form_soa(e, r, origin, direction, length):
-    """The closed form on coordinate rows ``(3, n)`` (struct of arrays), in place where possible."""
-    vex, vey, vez = e[0] - origin[0], e[1] - origin[1], e[2] - origin[2]
-    vrx, vry, vrz = r[0] - origin[0], r[1] - origin[1], r[2] - origin[2]
+    """The kernel's formula (distances from ``v - t w``) on coordinate rows ``(3, n)``
+    (struct of arrays), in place where possible. Nothing calls it: the search keeps its
+    points as ``(n, 3)`` rows, and converting them costs more than the layout saves."""
     wx, wy, wz = direction
-    te = vex * wx
-    te += vey * wy
-    te += vez * wz
-    tr = vrx * wx
-    tr += vry * wy
-    tr += vrz * wz
-    de = vex * vex
-    de += vey * vey
-    de += vez * vez
-    de -= te * te
-    np.maximum(de, 0.0, out=de)
-    np.sqrt(de, out=de)
-    dr = vrx * vrx
-    dr += vry * vry
-    dr += vrz * vrz
-    dr -= tr * tr
-    np.maximum(dr, 0.0, out=dr)
-    np.sqrt(dr, out=dr)
+    out = []
+    for p in (e, r):
+        vx, vy, vz = p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]
+        t = vx * wx
+        q = vy * wy
+        t += q
+        np.multiply(vz, wz, out=q)
+        t += q
+        for vc, wc in ((vx, wx), (vy, wy), (vz, wz)):
+            np.multiply(t, wc, out=q)
+            vc -= q
+        vx *= vx
+        vy *= vy
+        vz *= vz
+        vx += vy
+        vx += vz
+        np.sqrt(vx, out=vx)
+        out += [t, vx]
+    te, de, tr, dr = out
     t = te * dr
     t += tr * de
     de += dr
@@ -420,19 +444,22 @@ def _closed_form_soa(e, r, origin, direction, length):
 
 
 def variant_timings(n_pairs: int = 10_000, repeats: int = 300, rounds: int = 5, seed: int = 0) -> dict:
-    """ns per point of the engine kernel and of two rewrites of the same formula (same pairs).
+    """ns per point of :func:`closed_form` and of other formulations of it (same pairs, one run).
 
-    Not the engine's figure: this shows what the kernel could reach (row-wise dot
-    products instead of ``norm`` of a projected vector; coordinates as separate rows).
-    Both rewrites are checked against the engine to 1e-9 m.
+    Only the first entry is the figure of ``point_search_ns`` (the same call): the others
+    are the kernel before its rewrite (``einsum`` and ``np.linalg.norm``), the cancelling
+    ``d^2 = v.v - (v.w)^2`` form, and the kernel's formula on coordinate rows ``(3, n)``,
+    which nothing calls. All are checked against the kernel to 1e-9 m on these pairs
+    (random pairs rarely come close to the edge line, where the ``d^2`` form loses digits).
     """
     inst = random_instances(n_pairs, seed)
     soa = tuple(np.ascontiguousarray(x.T) for x in (inst.e, inst.r, inst.origin, inst.direction))
     t_ref, _ = closed_form(inst)
-    for t, _ in (_closed_form_dots(inst.e, inst.r, inst.origin, inst.direction, inst.length),
+    for t, _ in (_closed_form_einsum_norm(inst.e, inst.r, inst.origin, inst.direction, inst.length),
+                 _closed_form_dots(inst.e, inst.r, inst.origin, inst.direction, inst.length),
                  _closed_form_soa(*soa, inst.length)):
         if np.abs(t - t_ref).max() > 1e-9:
-            raise AssertionError("a closed-form variant disagrees with the engine's kernel")
+            raise AssertionError("a closed-form variant disagrees with diffraction_point_parameter")
     per = max(1, repeats // rounds)
 
     def loop(fn):
@@ -442,9 +469,12 @@ def variant_timings(n_pairs: int = 10_000, repeats: int = 300, rounds: int = 5, 
         return run
 
     times = interleaved({
-        "engine kernel (AoS, einsum + norm)": loop(lambda: closed_form(inst)),
-        "AoS, dot products only": loop(lambda: _closed_form_dots(inst.e, inst.r, inst.origin, inst.direction,
-                                                                  inst.length)),
-        "SoA (3, n) rows, in place": loop(lambda: _closed_form_soa(*soa, inst.length)),
+        "closed form, diffraction_point_parameter (AoS, projection, column ufuncs)": loop(lambda: closed_form(inst)),
+        "diffraction_point_parameter before its rewrite (AoS, einsum + norm)": loop(
+            lambda: _closed_form_einsum_norm(inst.e, inst.r, inst.origin, inst.direction, inst.length)),
+        "AoS, einsum dot products only (d^2 = v.v - (v.w)^2, cancels near the line)": loop(
+            lambda: _closed_form_dots(inst.e, inst.r, inst.origin, inst.direction, inst.length)),
+        "SoA (3, n) rows, same formula, in place (no caller)": loop(
+            lambda: _closed_form_soa(*soa, inst.length)),
     }, rounds)
     return {k: v.median_s / per / n_pairs * 1e9 for k, v in times.items()}
