@@ -15,6 +15,10 @@ compares algorithms rather than Python loops:
   the reduced coordinates ``(t, d)`` of each end point, computed once per (end point,
   dihedron) and shared by all the pairs that use them, so its cost per candidate is the
   last step of this kernel only;
+* **engine step** (``engine_candidate_ns``): that last step as the engine runs it,
+  :func:`wavepaths.search.geometry.diffraction_point_reduced` and the on-edge test on the
+  pairs' precomputed ``t_e, d_e, t_r, d_r`` (the projections are not timed: the engine
+  pays them once per end point and edge, not per pair);
 * **numerical**, the approach the seed replaced: the point of the edge segment AB that
   minimises the path length ``L(t) = |P(t) - E| + |P(t) - R|``, ``P(t) = A + t w``.
   ``L`` is convex, so three variants are timed:
@@ -50,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..search.geometry import diffraction_point_parameter
+from ..search.geometry import diffraction_point_parameter, diffraction_point_reduced
 from .timing import interleaved
 
 SEED_NS_PER_POINT = 1150.0  # seed §4: "less than 1.15 us" per solution (SGI Origin 200, R10000)
@@ -102,6 +106,36 @@ def closed_form(inst: EdgeInstances) -> tuple[np.ndarray, np.ndarray]:
     """(t, on_edge): the closed-form point from 3-D points (seed §2.3) and the on-edge test."""
     t = diffraction_point_parameter(inst.e, inst.r, inst.origin, inst.direction)
     return t, (t >= 0.0) & (t <= inst.length)
+
+
+@dataclass(frozen=True)
+class ReducedInstances:
+    """The pairs' reduced coordinates, as the engine holds them (computed once per end and edge)."""
+
+    te: np.ndarray
+    de: np.ndarray
+    tr: np.ndarray
+    dr: np.ndarray
+    length: np.ndarray
+
+
+def reduce_instances(inst: EdgeInstances) -> ReducedInstances:
+    """``t_e, d_e, t_r, d_r`` of every pair (not timed: the engine amortises them)."""
+    def proj(p):
+        v = p - inst.origin
+        t = np.einsum("ij,ij->i", v, inst.direction)
+        return t, np.linalg.norm(v - t[:, None] * inst.direction, axis=1)
+
+    te, de = proj(inst.e)
+    tr, dr = proj(inst.r)
+    return ReducedInstances(te, de, tr, dr, inst.length)
+
+
+def engine_step(red: ReducedInstances) -> tuple[np.ndarray, np.ndarray]:
+    """(t, on_edge): the engine's per-candidate step, the closed form from reduced coordinates
+    (:func:`wavepaths.search.geometry.diffraction_point_reduced`) and the on-edge test."""
+    t = diffraction_point_reduced(red.te, red.de, red.tr, red.dr)
+    return t, (t >= 0.0) & (t <= red.length)
 
 
 def closed_form_scalar(e, r, a, w, length) -> tuple[float, bool]:
@@ -333,20 +367,29 @@ def run_point_search(n_pairs: int = 10_000, repeats: int = 1_000, rounds: int = 
                 fn(inst)
         return run
 
-    contenders = {"closed_form": loop(closed_form, per_round)}
+    red = reduce_instances(inst)
+    t_eng, on_eng = engine_step(red)
+
+    def engine_loop():
+        for _ in range(per_round):
+            engine_step(red)
+
+    contenders = {"closed_form": loop(closed_form, per_round), "engine_step": engine_loop}
     contenders.update({name: loop(fn, num_per_round) for name, fn in NUMERICAL.items()})
     times = interleaved(contenders, rounds)
-    calls = {"closed_form": per_round, **{name: num_per_round for name in NUMERICAL}}
+    calls = {"closed_form": per_round, "engine_step": per_round, **{name: num_per_round for name in NUMERICAL}}
     ns = {name: [t / calls[name] / n_pairs * 1e9 for t in r.times_s] for name, r in times.items()}
     med = {name: float(np.median(v)) for name, v in ns.items()}
     fastest = min(NUMERICAL, key=lambda k: med[k])
 
     methods = {}
-    for name in ["closed_form", *NUMERICAL]:
+    for name in ["closed_form", "engine_step", *NUMERICAL]:
         entry = {"ns_per_point_median": med[name], "ns_per_point_min": float(min(ns[name])),
                  "ns_per_point_max": float(max(ns[name])), "calls": calls[name] * rounds,
                  "total_s": float(sum(times[name].times_s))}
-        if name != "closed_form":
+        if name == "engine_step":
+            entry["agreement_with_closed_form"] = _agreement(inst, t_cf, on_cf, t_eng, on_eng)
+        elif name != "closed_form":
             t, on, iters = results[name]
             entry["iterations"] = int(iters)
             entry["agreement_with_closed_form"] = _agreement(inst, t_cf, on_cf, t, on)
@@ -372,6 +415,7 @@ def run_point_search(n_pairs: int = 10_000, repeats: int = 1_000, rounds: int = 
         "fastest_numerical": fastest,
         "point_search_ns": med["closed_form"],
         "point_search_speedup": med[fastest] / med["closed_form"],
+        "engine_candidate_ns": med["engine_step"],
         "point_search_max_point_distance_m": methods[fastest]["agreement_with_closed_form"]["max_point_distance_m"],
         "scalar_per_call": scalar,
         "seed": {"ns_per_point": SEED_NS_PER_POINT, "speedup": list(SEED_SPEEDUP),

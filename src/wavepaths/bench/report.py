@@ -95,6 +95,7 @@ def headline(results: dict) -> dict:
     head = {
         "point_search_ns": ps.get("point_search_ns"),
         "point_search_speedup": ps.get("point_search_speedup"),
+        "engine_candidate_ns": ps.get("engine_candidate_ns"),
         "sionna_paths_time_ratio": sp.get("sionna_paths_time_ratio"),
         "diffraction_cost_ratio": dc.get("diffraction_cost_ratio"),
         "tradeoff_points": points,
@@ -292,6 +293,7 @@ interleaved round by round, and reported as medians over the rounds.</p>
         rows.append(f"<tr><td>{html.escape(k)}</td><td class='{cls}'>{'met' if v else ('missed' if v is False else 'not run')}</td></tr>")
     parts.append("<table><tr><th>target</th><th>result</th></tr>" + "".join(rows) + "</table>")
     parts.append(_table([["point_search_ns", head["point_search_ns"]], ["point_search_speedup", head["point_search_speedup"]],
+                         ["engine_candidate_ns", head.get("engine_candidate_ns")],
                          ["sionna_paths_time_ratio", head["sionna_paths_time_ratio"]],
                          ["diffraction_cost_ratio", head["diffraction_cost_ratio"]]], ["figure", "value"]))
     parts.append("<h2>Machine and versions</h2>" + _table([[k, v] for k, v in summary["machine"].items()], ["", ""]))
@@ -316,7 +318,7 @@ interleaved round by round, and reported as medians over the rounds.</p>
         sc = ps["scalar_per_call"]
         parts.append(_table([["closed form, pure Python", sc["closed_form_python_ns"]],
                              ["Newton (reduced), pure Python", sc["newton_python_ns"]],
-                             ["closed form, engine kernel on one pair", sc["closed_form_numpy_one_pair_ns"]],
+                             ["closed form from 3-D points, numpy, one pair", sc["closed_form_numpy_one_pair_ns"]],
                              ["ratio, pure Python", sc["speedup_python"]]], ["one pair per call", "ns"]))
         if ps.get("variants"):
             parts.append("<p>The same closed form written differently (not the engine's kernel; what it could reach):</p>")

@@ -125,3 +125,30 @@ def diffraction_point_parameter(
         return t
     ok = s > 0
     return np.where(ok, t / np.where(ok, s, 1.0), 0.5 * (te + tr))
+
+
+def diffraction_point_reduced(te: np.ndarray, de: np.ndarray, tr: np.ndarray, dr: np.ndarray) -> np.ndarray:
+    """The closed-form point (seed §2.3) from the end points' reduced coordinates.
+
+    ``t = (t_e d_r + t_r d_e) / (d_e + d_r)``, with ``t_e, t_r`` the coordinates of the
+    projections of E and R along the edge [m from its origin] and ``d_e, d_r`` their
+    distances to the edge line [m] (see :func:`diffraction_point_parameter`, which
+    computes them from 3-D points). The path search computes them once per (end point,
+    edge) and calls this per candidate pair: a few flops each.
+
+    Parameters
+    ----------
+    te, de, tr, dr : (k,) float64
+
+    Returns
+    -------
+    (k,) float64
+        ``t`` [m]; the midpoint ``(t_e + t_r) / 2`` where ``d_e + d_r = 0``.
+    """
+    den = de + dr
+    num = te * dr
+    num += tr * de
+    if den.all():
+        return np.divide(num, den, out=num)
+    ok = den > 0
+    return np.where(ok, num / np.where(ok, den, 1.0), 0.5 * (te + tr))
