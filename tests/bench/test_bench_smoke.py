@@ -58,14 +58,15 @@ def test_run_bench_writes_json(tmp_path):
 
 
 def test_console_script_has_bench():
+    import os
     import shutil
     import subprocess
+    import sys
 
-    exe = shutil.which("wavepaths")
-    if exe is None:  # pragma: no cover - the package is not installed as a script here
-        import pytest
-
-        pytest.skip("the wavepaths console script is not installed")
+    # the script installed beside this interpreter (the venv's bin), else the one on PATH
+    exe = os.path.join(os.path.dirname(sys.executable), "wavepaths")
+    exe = exe if os.path.exists(exe) else shutil.which("wavepaths")
+    assert exe is not None, "the wavepaths console script is not installed (pip install -e .)"
     out = subprocess.run([exe, "bench", "--help"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0
     assert "--quick" in out.stdout and "--munich" in out.stdout
