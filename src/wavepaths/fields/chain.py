@@ -139,11 +139,15 @@ BOUNDARY_EPS = 1e-12  # [rad] an observer this close to a shadow/reflection boun
 BOUNDARY_NUDGE = 1e-9  # [rad] the side it is moved to, matching the geometrical-optics decision
 
 
-def _path_keys(paths: Paths) -> set:
+def _path_keys(paths: Paths, pairs: np.ndarray) -> set:
+    """(tx, rx, interaction sequence) of the paths between the (tx, rx) ``pairs`` (k, 2) only:
+    the few pairs with a path near a boundary, not every path of the batch."""
+    n_rx = len(paths.rx_positions)
+    sel = np.nonzero(np.isin(paths.tx_index * n_rx + paths.rx_index, pairs[:, 0] * n_rx + pairs[:, 1]))[0]
     return {
         (int(paths.tx_index[i]), int(paths.rx_index[i]),
          tuple(zip(paths.interactions[i, : paths.depth[i]].tolist(), paths.primitive[i, : paths.depth[i]].tolist())))
-        for i in range(len(paths))
+        for i in sel
     }
 
 
@@ -172,7 +176,8 @@ def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g
     near = (np.abs(sb) < margin) | (np.abs(rb0) < margin) | (np.abs(rbn) < margin)
     if not near.any():
         return
-    keys = _path_keys(paths)
+    nr = rows[np.nonzero(near)[0]]
+    keys = _path_keys(paths, np.stack([paths.tx_index[nr], paths.rx_index[nr]], axis=1))
     dih = scene.dihedra
     for k in np.nonzero(near)[0]:
         i = rows[k]
