@@ -129,8 +129,9 @@ def test_embree_agrees_with_the_float64_numpy_caster(rng, name):
     a, b = random_segments(s, rng, 4000)
     e = EmbreeRayCaster(s).occluded(a, b)
     n = NumpyRayCaster(s).occluded(a, b)
-    # float32 vs float64 may disagree only for segments grazing an edge; none should here
-    assert (e != n).sum() <= 2, np.nonzero(e != n)
+    # Embree only finds faces, float64 decides: they may disagree only where Embree misses a
+    # face crossed within float32 resolution of its edge; none should here
+    assert (e != n).sum() == 0, np.nonzero(e != n)
     assert 0.05 < e.mean() < 0.95  # the test is not vacuous
 
 

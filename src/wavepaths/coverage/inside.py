@@ -23,6 +23,10 @@ triangle) pair in the same bin gets a 2-D point-in-triangle test and a height
 comparison. No Embree, no float32.
 
 Points lying exactly on a surface of a solid are on its boundary: either answer may come.
+
+This is wavepaths' one "is a point inside" rule: :mod:`wavepaths.scene.closed` applies it
+(:func:`inside_solids`, per solid) to transmitters inside closed objects and to the sides of
+coincident faces (contact faces).
 """
 
 from __future__ import annotations
@@ -150,13 +154,35 @@ def inside_solid_objects(scene: "Scene", points: np.ndarray, solids: SolidObject
     tol = scene.length_tolerance(scene.tolerances.plane_distance)
     votes = np.zeros(len(points), np.int64)
     for d in RAY_DIRECTIONS:
-        votes += _odd_crossings(points, corners, solids, d, tol)
+        odd = np.zeros(len(points), bool)
+        odd[_odd_crossings(points, corners, solids, d, tol)[0]] = True
+        votes += odd
+    return votes >= 2
+
+
+def inside_solids(scene: "Scene", points: np.ndarray, solids: SolidObjects) -> np.ndarray:
+    """(k, s) bool: whether each point (k, 3) [m] lies inside each solid (the same rule, per solid).
+
+    Dense in points x solids: meant for a few points (transmitters, test points).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    votes = np.zeros((len(points), len(solids)), np.int64)
+    if len(solids) == 0 or len(points) == 0:
+        return votes > 0
+    corners = scene.vertices[scene.triangles[solids.triangles]]
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    for d in RAY_DIRECTIONS:
+        p, s = _odd_crossings(points, corners, solids, d, tol)
+        votes[p, s] += 1
     return votes >= 2
 
 
 def _odd_crossings(points: np.ndarray, corners: np.ndarray, solids: SolidObjects, direction: np.ndarray,
-                   tol: float) -> np.ndarray:
-    """(k,) bool: an odd number of crossings of one solid along the ray ``p + t direction``, t > 0."""
+                   tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The (point, solid) pairs crossed an odd number of times by the ray ``p + t direction``, t > 0.
+
+    Returns two (m,) int64 arrays, each pair once.
+    """
     slope = direction[:2] / direction[2]
     p2 = points[:, :2] - points[:, 2:3] * slope  # sheared: the ray becomes vertical
     c2 = corners[:, :, :2] - corners[:, :, 2:3] * slope
@@ -170,7 +196,7 @@ def _odd_crossings(points: np.ndarray, corners: np.ndarray, solids: SolidObjects
     c2, cz, e1, e2, det = c2[live], cz[live], e1[live], e2[live], det[live]
     owner = solids.triangle_solid[live]
     if len(det) == 0:
-        return np.zeros(len(points), bool)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
 
     # hash grid over the sheared plane: (triangle, bin) pairs, sorted by bin
     lo_t, hi_t = c2.min(axis=1), c2.max(axis=1)
@@ -198,7 +224,7 @@ def _odd_crossings(points: np.ndarray, corners: np.ndarray, solids: SolidObjects
     match = in_range & (uk[pos] == pkey)
     n_cand = np.where(match, count[pos], 0)
 
-    odd = np.zeros(len(points), bool)
+    out_p, out_s = [], []
     # points in blocks whose candidate pairs fit the budget
     cum = np.cumsum(n_cand)
     s = 0
@@ -224,6 +250,7 @@ def _odd_crossings(points: np.ndarray, corners: np.ndarray, solids: SolidObjects
         p_odd, s_odd = up[n % 2 == 1] // len(solids), up[n % 2 == 1] % len(solids)
         # below an open base the ray enters without crossing: not inside
         ok = solids.closed[s_odd] | (points[p_odd, 2] >= solids.base_z[s_odd] - tol)
-        odd[p_odd[ok]] = True
+        out_p.append(p_odd[ok])
+        out_s.append(s_odd[ok])
         s = e
-    return odd
+    return np.concatenate(out_p).astype(np.int64), np.concatenate(out_s).astype(np.int64)

@@ -1,16 +1,42 @@
 """Batched segment-occlusion queries.
 
-Two implementations answer the same question, "is the open segment from ``a`` to
-``b`` blocked by any triangle?":
+**What blocks a segment.** The segment from ``a`` to ``b`` is blocked when it passes
+through a face: it crosses the face's plane from one side to the other (both ends farther
+than the plane tolerance from the plane, on opposite sides) at a point of the closed
+triangle. Hence, by definition:
+
+* an end point on a face (a reflection or diffraction point, or a transmitter or receiver
+  placed on a surface) *touches* that face and is not blocked by it;
+* a segment lying in a face's plane (both ends within the plane tolerance of it) runs along
+  the face and is not blocked by it, nor where it touches the boundary edges of that face
+  (a segment over a flat roof, in the roof's plane, that meets the top edge of a wall
+  below it);
+* a segment grazing a face (passing near it without crossing its plane) is not blocked;
+* a segment crossing a face exactly through one of its edges or vertices is blocked
+  (closed triangles: no ray leaks between the two triangles of a wall).
+
+The plane tolerance is :func:`plane_tolerance` (1e-12 of the scene diagonal plus 1e-14 of
+the scene's distance from the origin: above float64 rounding, far below any geometry),
+plus, for a triangle merged into a polygon within ``coplanar_angle``, its corners'
+distance from the polygon's plane (see :class:`~wavepaths.raycast.numpy_caster.ExactSegments`).
+The decision is symmetric in the end points: both casters put them in a canonical order
+(:func:`canonical`) before any arithmetic, so ``a -> b`` and ``b -> a`` give bit-identical
+answers. No end is pulled in by an offset: the rule itself makes end points on surfaces
+harmless, so a face arbitrarily close to an end point (the hidden face of a thin wedge)
+still blocks.
+
+Two implementations answer the question:
 
 * :class:`~wavepaths.raycast.embree.EmbreeRayCaster` (default): Intel Embree through
-  ``embreex``. **This is where float32 enters wavepaths.** Embree stores vertices and
-  rays in float32, so the caster subtracts the scene centre before converting (city
-  scenes come in projected coordinates near 1e6 m, where float32 resolution would be
-  0.06 m), and shortens every segment by the scene-scaled ``ray_offset`` at both ends.
-* :class:`~wavepaths.raycast.numpy_caster.NumpyRayCaster`: a float64 Möller-Trumbore
-  in numpy, exact enough to serve as a reference on small scenes; the tests hold the
-  two together.
+  ``embreex``. **This is where float32 enters wavepaths.** Embree finds, in float32 on
+  recentred coordinates, the nearest face along two rays covering the segment; every hit
+  is confirmed or overruled by the float64 rule on that face, and a segment whose float32
+  answer float64 cannot confirm is decided in float64 against the whole scene.
+* :class:`~wavepaths.raycast.numpy_caster.NumpyRayCaster`: the float64 rule over every
+  (segment, triangle) pair, the reference; the tests hold the two together. The only
+  float32 limit left in the Embree caster is a face the segment crosses within float32
+  resolution (~1e-7 of the scene's half-size) of one of its edges, which Embree may miss;
+  the search casts the segments of such near-boundary pairs in float64.
 """
 
 from __future__ import annotations
@@ -29,8 +55,8 @@ class RayCaster(Protocol):
     def occluded(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(k,) bool: whether the segment ``a[i] -> b[i]`` ((k, 3) float64, metres) is blocked.
 
-        The segment is shortened by the scene's ``ray_offset`` at both ends, so end
-        points lying on surfaces (reflection and diffraction points) do not block it.
+        By the rule of :mod:`wavepaths.raycast`: end points may lie on surfaces; the
+        answer does not depend on the order of the ends.
         """
         ...
 
@@ -52,21 +78,21 @@ def default_raycaster(scene: "Scene") -> RayCaster:
         return NumpyRayCaster(scene)
 
 
-def shortened(a: np.ndarray, b: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Origins, unit directions and lengths of segments shortened by ``offset`` at each end.
+def plane_tolerance(scene: "Scene") -> float:
+    """Distance [m] within which a point lies on a face's plane, for occlusion."""
+    return 1e-12 * scene.diagonal + 1e-14 * float(np.abs(scene.center).max())
 
-    Returns
-    -------
-    origin : (k, 3) float64
-    direction : (k, 3) float64
-    length : (k,) float64
-        May be <= 0 for segments shorter than ``2 * offset``: such segments are never
-        occluded (both ends sit on the same surface point within tolerance).
+
+def canonical(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The segments' ends in a canonical order: ``a`` lexicographically before ``b``.
+
+    Returns ``(first, second, swapped)``; every computation on a segment starts from this
+    order, so that ``a -> b`` and ``b -> a`` are the same float64 operations.
     """
-    d = b - a
-    full = np.linalg.norm(d, axis=1)
-    unit = d / np.where(full > 0, full, 1.0)[:, None]
-    start = a + offset * unit
-    end = b - offset * unit  # from b itself, not a + (|b - a| - 2 offset) u: no rounding at far ends
-    length = np.einsum("ij,ij->i", end - start, unit)
-    return start, unit, length
+    swap = np.zeros(len(a), dtype=bool)
+    undecided = np.ones(len(a), dtype=bool)
+    for c in range(3):
+        swap |= undecided & (b[:, c] < a[:, c])
+        undecided &= b[:, c] == a[:, c]
+    return np.where(swap[:, None], b, a), np.where(swap[:, None], a, b), swap
+

@@ -1,4 +1,4 @@
-"""Segment occlusion through Embree (embreex), float32 on recentred coordinates."""
+"""Segment occlusion through Embree (embreex), float32 on recentred coordinates, every hit checked in float64."""
 
 from __future__ import annotations
 
@@ -8,14 +8,15 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from . import shortened
+from . import canonical
+from .numpy_caster import ExactSegments
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
 
 
 class EmbreeRayCaster:
-    """Occlusion queries against a scene with Embree.
+    """Occlusion queries against a scene with Embree, decided by the float64 rule.
 
     Parameters
     ----------
@@ -25,31 +26,38 @@ class EmbreeRayCaster:
 
     Notes
     -----
-    float32 enters here and only here, and three guards keep it harmless:
+    float32 enters here and only here, and only to *find* faces:
 
     1. vertices and rays are expressed relative to ``scene.center`` before the cast, so
        positions resolve to ~6e-8 of the scene's half-size whatever their absolute
        coordinates (city scenes sit near 1e6 m);
-    2. each segment is clipped, in float64, to the scene's bounding box (a transmitter
-       20 km away gives a ray no longer than the scene), because a float32 direction
-       misplaces the far end of a ray by ~6e-8 of its length;
-    3. the ray starts from the end nearer the scene centre, and both original ends are
-       pulled in by ``scene.tolerances.ray_offset * scene.diagonal`` (1e-6 of the
-       diagonal: ~30x the float32 resolution), so an end lying on a surface (a
-       reflection or diffraction point) is not reported as a hit.
+    2. each ray is clipped, in float64, to the scene's bounding box (a transmitter 20 km
+       away gives a ray no longer than the scene), because a float32 direction misplaces
+       the far end of a ray by ~6e-8 of its length;
+    3. a segment ``a -> b`` (canonical order) is covered by two rays, from its point at 1/4
+       towards ``b`` and from its point at 3/4 towards ``a``; they overlap, so a face
+       through the middle is inside both. Embree returns the nearest face along each ray.
+       That face either blocks the segment by the float64 rule (blocked), or contains the
+       ray's target end in its plane (the ray reached the surface the end point lies on:
+       nothing nearer blocks, this half is clear), or neither (a float32 graze: the
+       segment is decided in float64 against the whole scene).
+
+    No end is pulled in or lifted: a face within any distance of an end point is seen
+    (down to float32 resolution), and an end lying on a face does not hit it.
     """
 
     def __init__(self, scene: "Scene", batch: int = 1 << 20) -> None:
         self._center = scene.center.copy()
-        self._offset = scene.length_tolerance(scene.tolerances.ray_offset)
+        self._exact = ExactSegments(scene)
         self._batch = batch
         lo, hi = scene.bounds - self._center
-        pad = 10 * self._offset + 1e-9
+        pad = 1e-6 * scene.diagonal + 1e-9
         self._lo, self._hi = lo - pad, hi + pad
         self._scene = rtcore_scene.EmbreeScene()
         corners = (scene.vertices[scene.triangles] - self._center).astype(np.float32)
         self._mesh = TriangleMesh(self._scene, corners)
         self._rays = 0
+        self.exact_fallbacks = 0  # segments Embree could not decide, decided in float64
 
     @property
     def rays_cast(self) -> int:
@@ -59,44 +67,62 @@ class EmbreeRayCaster:
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
         k = len(a)
-        out = np.zeros(k, dtype=bool)
+        blocked = np.zeros(k, dtype=bool)
         if k == 0:
-            return out
-        origin, direction, length = self._prepare(a - self._center, b - self._center)
-        live = np.nonzero(length > 0)[0]
-        for s in range(0, len(live), self._batch):
-            sel = live[s : s + self._batch]
-            hit = self._scene.run(
-                origin[sel].astype(np.float32),
-                direction[sel].astype(np.float32),
-                query="OCCLUDED",
-                dists=length[sel].astype(np.float32),
-            )
-            out[sel] = np.asarray(hit) != -1
-        self._rays += len(live)
-        return out
+            return blocked
+        a, b, _ = canonical(a - self._center, b - self._center)
+        d = b - a
+        uncertain = np.zeros(k, dtype=bool)
+        todo = np.nonzero((d != 0).any(axis=1))[0]
+        for origin, target in ((a + 0.25 * d, b), (b - 0.25 * d, a)):
+            sel = todo[~blocked[todo] & ~uncertain[todo]]
+            if len(sel) == 0:
+                break
+            prim = self._nearest(origin[sel], target[sel])
+            h = sel[prim >= 0]
+            p = prim[prim >= 0]
+            confirmed = self._exact.crosses(a[h], b[h], p)
+            blocked[h[confirmed]] = True
+            h, p = h[~confirmed], p[~confirmed]
+            uncertain[h[~self._exact.in_plane(target[h], p)]] = True
+        rest = np.nonzero(uncertain & ~blocked)[0]
+        if len(rest):
+            self.exact_fallbacks += len(rest)
+            blocked[rest] = self._exact.blocked(a[rest], b[rest])
+        return blocked
 
-    def _prepare(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Shorten, clip to the bounding box and orient segments (float64, recentred)."""
-        origin, direction, length = shortened(a, b, self._offset)
+    def _nearest(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """(k,) int: the triangle Embree hits first on the way from ``origin`` to ``target`` (recentred), -1 if none."""
+        d = target - origin
+        length = np.linalg.norm(d, axis=1)
+        unit = d / np.where(length > 0, length, 1.0)[:, None]
         # slab clipping of [0, length] against the box
         with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / direction
+            inv = 1.0 / unit
             t1 = (self._lo - origin) * inv
             t2 = (self._hi - origin) * inv
-        tmin = np.nanmax(np.where(np.isfinite(np.minimum(t1, t2)), np.minimum(t1, t2), -np.inf), axis=1)
-        tmax = np.nanmin(np.where(np.isfinite(np.maximum(t1, t2)), np.maximum(t1, t2), np.inf), axis=1)
-        inside_box = ((origin >= self._lo) & (origin <= self._hi)) | (direction != 0)
+        near_t, far_t = np.minimum(t1, t2), np.maximum(t1, t2)
+        tmin = np.max(np.where(np.isfinite(near_t), near_t, -np.inf), axis=1)
+        tmax = np.min(np.where(np.isfinite(far_t), far_t, np.inf), axis=1)
+        inside_box = ((origin >= self._lo) & (origin <= self._hi)) | (unit != 0)
         t0 = np.maximum(tmin, 0.0)
         t_end = np.minimum(tmax, length)
-        empty = (t_end <= t0) | ~inside_box.all(axis=1)
-        start = origin + t0[:, None] * direction
-        end = origin + t_end[:, None] * direction
-        # cast from the end nearer the centre: float32 direction errors grow away from the origin
-        swap = np.einsum("ij,ij->i", start, start) > np.einsum("ij,ij->i", end, end)
-        new_origin = np.where(swap[:, None], end, start)
-        new_dir = np.where(swap[:, None], -direction, direction)
-        return new_origin, new_dir, np.where(empty, 0.0, t_end - t0)
+        live = np.nonzero((t_end > t0) & inside_box.all(axis=1))[0]
+        prim = np.full(len(origin), -1, dtype=np.int64)
+        start = origin + t0[:, None] * unit
+        span = t_end - t0
+        for s in range(0, len(live), self._batch):
+            sel = live[s : s + self._batch]
+            res = self._scene.run(
+                start[sel].astype(np.float32),
+                unit[sel].astype(np.float32),
+                dists=span[sel].astype(np.float32),
+                query="INTERSECT",
+                output=1,
+            )
+            prim[sel] = np.asarray(res["primID"], dtype=np.int64)
+        self._rays += len(live)
+        return prim
 
     def __getstate__(self) -> dict:  # Embree handles do not pickle: rebuild on the worker
         raise TypeError("EmbreeRayCaster is rebuilt per process from its Scene; pickle the Scene instead")

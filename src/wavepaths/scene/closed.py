@@ -1,13 +1,27 @@
-"""Closed objects: which polygons can only be seen from outside, and which are hidden.
+"""Closed objects and coincident faces: which side of each polygon can reflect.
 
-Two receiver-independent facts prune the image tree without losing a path:
+Receiver-independent facts prune the image tree without losing a path:
 
-* a polygon of a **closed, consistently oriented object** (every edge of the object
-  shared by exactly two of its triangles, traversed in opposite directions) can reflect
-  only a wave arriving from outside the object, unless the source itself is inside it;
-* a polygon lying entirely inside a coplanar polygon of another object (the floor of a
-  building standing on the ground) is a contact face: any path reaching it would have to
-  cross the other object's polygon, so it never reflects.
+* a polygon of a **closed, consistently oriented object with a volume** (every edge of the
+  object shared by exactly two of its triangles, traversed in opposite directions; signed
+  volume above ``plane_distance`` times its area) can reflect only a wave arriving from
+  outside the object, unless the source itself is inside it;
+* **coincident faces** (a polygon lying entirely inside a coplanar polygon ``q``, of any
+  object): each side of the common surface reflects once. A side of the inner polygon is
+  dropped when ``q`` reflects on that side too (the duplicate), or when that side lies
+  inside a solid (a contact face: the floor of a building standing on the ground, the
+  shared wall of two touching blocks: a wave would have to come from inside the solid).
+  Between two polygons covering each other, a side goes to the one whose normal faces it,
+  then to the lower index.
+
+A zero-thickness **double-sided screen** is therefore two-sided whatever its mesh: the
+same quad twice with opposite orientations in one object (welded into one polygon with
+triangles of both orientations, or a closed object without volume) reflects on both
+sides; as two objects (or two materials), each copy reflects on its own front side. Its
+edge is a half-plane (n = 2) for the diffraction search, which works on the mesh's edges.
+
+"Is a point inside" is decided by the ray-parity rule of :mod:`wavepaths.coverage.inside`
+(three rays, float64), the same for coverage cells and for the sources here.
 """
 
 from __future__ import annotations
@@ -51,70 +65,138 @@ def _signed_volume(scene: "Scene", o: int) -> float:
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
-def outward_polygon_sign(scene: "Scene") -> np.ndarray:
-    """(p,) float: +1 / -1 when ``polygon_normal`` points out of / into its closed object, 0 if open."""
+def solid_objects_mask(scene: "Scene") -> np.ndarray:
+    """(objects,) bool: closed objects that enclose a volume (not a double-sided sheet).
+
+    A closed surface thinner than ``plane_distance`` everywhere (the same quad twice with
+    opposite orientations) has a signed volume below ``plane_distance`` times its area.
+    """
     closed = closed_objects(scene)
-    sign = np.zeros(scene.num_polygons)
-    first = scene.polygon_tris[scene.polygon_tri_ptr[:-1]]
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    area = np.bincount(scene.triangle_object, weights=scene.areas, minlength=len(closed))
     for o in np.nonzero(closed)[0]:
+        if abs(_signed_volume(scene, int(o))) <= tol * area[o]:
+            closed[o] = False
+    return closed
+
+
+def _solid_sign(scene: "Scene") -> np.ndarray:
+    """(p,) float: +1 / -1 when ``polygon_normal`` points out of / into its solid object, else 0."""
+    solid = solid_objects_mask(scene)
+    sign = np.zeros(scene.num_polygons)
+    poly = scene.triangle_polygon
+    agree = np.sign(np.einsum("ij,ij->i", scene.normals, scene.polygon_normal[poly]))
+    # a polygon welded from triangles of both orientations is a double-sided sheet
+    lo = np.full(scene.num_polygons, 1.0)
+    np.minimum.at(lo, poly, agree)
+    for o in np.nonzero(solid)[0]:
         vol = _signed_volume(scene, int(o))
-        if vol == 0:
-            continue
-        polys = np.nonzero(scene.polygon_object == o)[0]
-        tri_n = scene.normals[first[polys]]
-        agree = np.sign(np.einsum("ij,ij->i", tri_n, scene.polygon_normal[polys]))
-        sign[polys] = agree * np.sign(vol)
+        polys = np.nonzero((scene.polygon_object == o) & (lo > 0))[0]
+        sign[polys] = np.sign(vol)
     return sign
 
 
-def hidden_polygons(scene: "Scene") -> np.ndarray:
-    """(p,) bool: polygons entirely inside a coplanar polygon of another object (contact faces)."""
+def coincident_polygons(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
+    """Pairs ``(i, q)``: polygon ``i`` lies entirely inside the coplanar polygon ``q`` (q != i)."""
     tol = scene.length_tolerance(scene.tolerances.plane_distance)
     p = scene.num_polygons
-    hidden = np.zeros(p, dtype=bool)
     n, d = scene.polygon_normal, scene.polygon_offset
-    verts_of = [np.unique(scene.triangles[scene.polygon_triangles(i)]) for i in range(p)]
+    out_i, out_q = [], []
     for i in range(p):
-        pts = scene.vertices[verts_of[i]]
-        # candidate hosts: other objects, parallel, same plane
-        par = (np.abs(n @ n[i]) > 1 - 1e-9) & (scene.polygon_object != scene.polygon_object[i])
-        cand = np.nonzero(par)[0]
+        pts = scene.vertices[np.unique(scene.triangles[scene.polygon_triangles(i)])]
+        cand = np.nonzero(np.abs(n @ n[i]) > 1 - 1e-9)[0]
+        cand = cand[cand != i]
         if len(cand) == 0:
             continue
         on = np.all(np.abs(pts @ n[cand].T - d[cand]) <= tol, axis=0)
         for q in cand[on]:
             if points_in_polygons(scene, pts, np.full(len(pts), q)).all():
-                hidden[i] = True
-                break
-    return hidden
+                out_i.append(i)
+                out_q.append(int(q))
+    return np.array(out_i, dtype=np.int64), np.array(out_q, dtype=np.int64)
+
+
+def _interior_points(scene: "Scene", polygons: np.ndarray) -> np.ndarray:
+    """(k, 3): the centroid of the largest triangle of each polygon (a point inside it)."""
+    out = np.zeros((len(polygons), 3))
+    for j, i in enumerate(polygons):
+        tris = scene.polygon_triangles(int(i))
+        t = tris[np.argmax(scene.areas[tris])]
+        out[j] = scene.vertices[scene.triangles[t]].mean(axis=0)
+    return out
+
+
+def polygon_sides(scene: "Scene") -> np.ndarray:
+    """(p, 2) bool: whether each polygon reflects waves arriving on the side its normal points
+    to (column 0) and on the other side (column 1). See the module docstring."""
+    sign = _solid_sign(scene)
+    base = np.stack([sign >= 0, sign <= 0], axis=1)
+    sides = base.copy()
+    ii, qq = coincident_polygons(scene)
+    if len(ii) == 0:
+        return sides
+    contains = set(zip(ii.tolist(), qq.tolist()))
+    # which sides of the inner polygons lie inside a solid (contact faces)
+    from ..coverage.inside import inside_solid_objects, solid_objects
+
+    inner = np.unique(ii)
+    x = _interior_points(scene, inner)
+    delta = 4 * scene.length_tolerance(scene.tolerances.plane_distance)
+    nrm = scene.polygon_normal[inner]
+    solids = solid_objects(scene)
+    in_solid = np.stack([inside_solid_objects(scene, x + delta * nrm, solids),
+                         inside_solid_objects(scene, x - delta * nrm, solids)], axis=1)
+    row = {int(i): r for r, i in enumerate(inner)}
+    n = scene.polygon_normal
+    for i, q in zip(ii.tolist(), qq.tolist()):
+        flip = float(n[i] @ n[q]) < 0  # q's column for i's side 0 is 1 when the normals oppose
+        mutual = (q, i) in contains
+        for c in (0, 1):
+            cq = 1 - c if flip else c
+            if in_solid[row[i], c]:
+                sides[i, c] = False
+            elif base[q, cq]:
+                if not mutual:
+                    sides[i, c] = False  # q covers i and reflects there too
+                else:
+                    faces_i, faces_q = c == 0, cq == 0
+                    q_wins = faces_q and not faces_i if faces_q != faces_i else q < i
+                    if q_wins:
+                        sides[i, c] = False
+    return sides
+
+
+def outward_polygon_sign(scene: "Scene") -> np.ndarray:
+    """(p,) float: +1 / -1 when a polygon reflects only on the side its normal points to /
+    only on the other side (the outside of a closed object), 0 if on both (or hidden)."""
+    sides = scene.polygon_sides
+    return np.where(sides[:, 0] & ~sides[:, 1], 1.0, np.where(sides[:, 1] & ~sides[:, 0], -1.0, 0.0))
+
+
+def hidden_polygons(scene: "Scene") -> np.ndarray:
+    """(p,) bool: polygons that reflect on neither side (contact faces, duplicates)."""
+    return ~scene.polygon_sides.any(axis=1)
 
 
 def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
-    """(k, objects) bool: whether each point lies inside each closed object (ray parity, float64).
+    """(k, objects) bool: whether each point lies inside each closed object with a volume.
 
-    A ray along a fixed irrational direction is cast from each point; crossings with the
-    object's triangles are counted. Meant for a handful of points (transmitters).
+    The ray-parity rule of :mod:`wavepaths.coverage.inside` (three rays, majority, float64)
+    applied to each such object alone. Meant for a handful of points (transmitters).
     """
+    from ..coverage.inside import SolidObjects, inside_solids
+
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    closed = closed_objects(scene)
-    out = np.zeros((len(points), len(closed)), dtype=bool)
-    direction = np.array([0.5773502691896258, 0.5773502691896257, 0.5773502691896259])
-    direction = direction + np.array([1e-3, -2e-3, 3e-3])
-    direction /= np.linalg.norm(direction)
-    for o in np.nonzero(closed)[0]:
-        t = scene.triangles[scene.triangle_object == o]
-        v0 = scene.vertices[t[:, 0]]
-        e1 = scene.vertices[t[:, 1]] - v0
-        e2 = scene.vertices[t[:, 2]] - v0
-        pvec = np.cross(direction, e2)
-        det = np.einsum("fj,fj->f", e1, pvec)
-        ok = np.abs(det) > 1e-300
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        tvec = points[:, None, :] - v0[None]
-        u = np.einsum("kfj,fj->kf", tvec, pvec) * inv
-        q = np.cross(tvec, e1[None])
-        v = (q @ direction) * inv
-        s = np.einsum("kfj,fj->kf", q, e2) * inv
-        hits = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (s > 0)
-        out[:, o] = hits.sum(axis=1) % 2 == 1
+    solid = np.nonzero(solid_objects_mask(scene))[0]
+    out = np.zeros((len(points), len(scene.object_names)), dtype=bool)
+    if len(solid) == 0 or len(points) == 0:
+        return out
+    index = np.full(len(scene.object_names), -1, dtype=np.int64)
+    index[solid] = np.arange(len(solid))
+    tris = np.nonzero(index[scene.triangle_object] >= 0)[0]
+    groups = np.empty(len(solid), dtype=object)
+    groups[:] = [(int(o),) for o in solid]
+    solids = SolidObjects(groups, np.ones(len(solid), bool), np.full(len(solid), -np.inf), tris,
+                          index[scene.triangle_object[tris]])
+    out[:, solid] = inside_solids(scene, points, solids)
     return out

@@ -148,15 +148,22 @@ class Scene:
         return default_raycaster(self)
 
     @functools.cached_property
+    def polygon_sides(self) -> np.ndarray:
+        """(p, 2) bool: a polygon reflects on its normal's side / on the other side (closed objects, coincident faces)."""
+        from .closed import polygon_sides
+
+        return polygon_sides(self)
+
+    @functools.cached_property
     def outward_sign(self) -> np.ndarray:
-        """(p,) float64: +1/-1 if a polygon's normal points out of/into its closed object, 0 if open."""
+        """(p,) float64: +1/-1 if a polygon reflects only on its normal's side/the other side, 0 if on both."""
         from .closed import outward_polygon_sign
 
         return outward_polygon_sign(self)
 
     @functools.cached_property
     def hidden_polygons(self) -> np.ndarray:
-        """(p,) bool: contact faces lying inside a coplanar polygon of another object."""
+        """(p,) bool: polygons reflecting on neither side (contact faces, duplicated coincident faces)."""
         from .closed import hidden_polygons
 
         return hidden_polygons(self)
