@@ -94,20 +94,27 @@ class EmbreeRayCaster:
     def _nearest(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
         """(k,) int: the triangle Embree hits first on the way from ``origin`` to ``target`` (recentred), -1 if none."""
         d = target - origin
-        length = np.linalg.norm(d, axis=1)
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
         unit = d / np.where(length > 0, length, 1.0)[:, None]
-        # slab clipping of [0, length] against the box
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / unit
-            t1 = (self._lo - origin) * inv
-            t2 = (self._hi - origin) * inv
-        near_t, far_t = np.minimum(t1, t2), np.maximum(t1, t2)
-        tmin = np.max(np.where(np.isfinite(near_t), near_t, -np.inf), axis=1)
-        tmax = np.min(np.where(np.isfinite(far_t), far_t, np.inf), axis=1)
-        inside_box = ((origin >= self._lo) & (origin <= self._hi)) | (unit != 0)
-        t0 = np.maximum(tmin, 0.0)
-        t_end = np.minimum(tmax, length)
-        live = np.nonzero((t_end > t0) & inside_box.all(axis=1))[0]
+        t0 = np.zeros(len(origin))
+        t_end = length.copy()
+        # slab clipping of [0, length] against the box, for the rays with an end outside it
+        # (interaction points lie on the scene's faces: most rays need none)
+        outside = ~(((origin >= self._lo) & (origin <= self._hi)).all(axis=1)
+                    & ((target >= self._lo) & (target <= self._hi)).all(axis=1))
+        if outside.any():
+            o, u = origin[outside], unit[outside]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = 1.0 / u
+                t1 = (self._lo - o) * inv
+                t2 = (self._hi - o) * inv
+            near_t, far_t = np.minimum(t1, t2), np.maximum(t1, t2)
+            tmin = np.max(np.where(np.isfinite(near_t), near_t, -np.inf), axis=1)
+            tmax = np.min(np.where(np.isfinite(far_t), far_t, np.inf), axis=1)
+            inside_box = (((o >= self._lo) & (o <= self._hi)) | (u != 0)).all(axis=1)
+            t0[outside] = np.where(inside_box, np.maximum(tmin, 0.0), 0.0)
+            t_end[outside] = np.where(inside_box, np.minimum(tmax, length[outside]), 0.0)
+        live = np.nonzero(t_end > t0)[0]
         prim = np.full(len(origin), -1, dtype=np.int64)
         start = origin + t0[:, None] * unit
         span = t_end - t0
