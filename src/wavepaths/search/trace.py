@@ -86,6 +86,54 @@ def _warn_inside(scene: Scene, tx: np.ndarray, rx: np.ndarray) -> None:
             )
 
 
+def points_on_faces(scene: Scene, points: np.ndarray, budget: int = INSIDE_CHECK_BUDGET) -> np.ndarray:
+    """(n,) int64: a polygon each point lies exactly on (within the casters' plane tolerance), or -1.
+
+    Such a point takes part in no reflection or diffraction on that polygon or its edges
+    (its side of the face is undefined, docs/search.md), so the field computed there is
+    the limit from neither side: :func:`trace` reports it. (points x polygons) distance
+    tests, chunked; skipped (all -1) beyond ``budget`` of them.
+    """
+    from ..raycast import plane_tolerance
+    from ..scene.polygon_query import points_in_polygons
+
+    n, p = len(points), scene.num_polygons
+    out = np.full(n, -1, dtype=np.int64)
+    if n == 0 or p == 0 or n * p > budget:
+        return out
+    tol = plane_tolerance(scene)
+    step = max(1, (1 << 22) // p)
+    for s in range(0, n, step):
+        pts = points[s : s + step]
+        dist = np.abs(pts @ scene.polygon_normal.T - scene.polygon_offset[None, :])
+        i, q = np.nonzero(dist <= tol)
+        if len(i) == 0:
+            continue
+        on = points_in_polygons(scene, pts[i], q)
+        out[s + i[on]] = q[on]
+    return out
+
+
+def _warn_on_faces(scene: Scene, tx: np.ndarray, rx: np.ndarray) -> None:
+    """Report transmitters and receivers lying exactly on a face (see :func:`points_on_faces`)."""
+    import warnings
+
+    from ..scene.model import WavepathsWarning
+
+    for name, pts in (("transmitter", tx), ("receiver", rx)):
+        face = points_on_faces(scene, pts)
+        rows = np.nonzero(face >= 0)[0]
+        if len(rows):
+            obj = scene.object_names[scene.polygon_object[face[rows[0]]]]
+            warnings.warn(
+                f"{len(rows)} {name}(s) lie exactly on a face (first: row {rows[0]}, object {obj}): they take "
+                "part in no reflection or diffraction there, and the field there is the limit from neither "
+                "side of the face; move them off it (any distance above the plane tolerance is exact)",
+                WavepathsWarning,
+                stacklevel=3,
+            )
+
+
 def trace(
     scene: Scene,
     tx,
@@ -139,6 +187,7 @@ def trace(
         i, j = np.argwhere(diff <= scene.length_tolerance(scene.tolerances.weld))[0]
         raise WavepathsError(f"transmitter {i} and receiver {j} are at the same position {tx[i].tolist()}")
     _warn_inside(scene, tx, rx)
+    _warn_on_faces(scene, tx, rx)
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
     stats: Counter = Counter(ctx.stats)
     batches = []
