@@ -8,7 +8,10 @@ it (``diffraction_reflections=2``: R-D, D-R, R-D-R, R-R-D, D-R-R), in under 10 m
 The map runs in a child process with a time limit and an 8 GiB address-space limit. The
 child writes its progress (cells done, stage) to a small JSON file as it goes, so that a
 run that does not finish still tells how far it got and at what rate; the report gives
-the extrapolated time.
+the extrapolated time. Before it, another child builds the transmitter context and traces
+one tile (:func:`munich_sample`): the report then has the context's counts, time and memory
+and the tile rate even when the full map is hopeless, and the full map is skipped when that
+sample puts it beyond its time limit.
 """
 
 from __future__ import annotations
@@ -76,11 +79,73 @@ def munich_map(progress_file: str, cell_size: float = 2.0, options: dict | None 
             "reached_fraction": float(np.isfinite(m.path_gain_db())[~m.inside].mean())}
 
 
+def munich_sample(progress_file: str, cell_size: float = 2.0, options: dict | None = None, cells: int = 256,
+                  workers: int | None = None) -> dict:
+    """The transmitter context and one tile of the munich map (runs in a child process).
+
+    Builds the context (image tree, beam trees, diffraction sources: its time, its counts and
+    the process's memory peak), traces ``cells`` consecutive cells from the middle of the grid
+    (one coverage tile) and extrapolates the whole map: ``context_s + tile_s * active cells /
+    cells / workers``. Tells whether the full map can fit its time limit before running it.
+    """
+    import numpy as np
+
+    from ..coverage import PlanarGrid
+    from ..coverage.inside import inside_solid_objects, solid_objects
+    from ..coverage.solver import default_workers
+    from ..scene import load_scene
+    from ..search import TraceOptions
+    from ..search.context import build_tx_context
+    from ..search.tile import trace_tile
+    from .isolated import peak_rss_bytes
+    from .scenes import sionna_scene_xml
+
+    opts = TraceOptions(**(options or {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 2}))
+    state: dict = {"stage": "load", "t0": time.time()}
+    _write(progress_file, state)
+    t = time.perf_counter()
+    scene = load_scene(sionna_scene_xml("munich"))
+    load_s = time.perf_counter() - t
+    grid = PlanarGrid.footprint(scene, cell_size, 1.5)
+    flat = grid.cell_centers().reshape(-1, 3)
+    t = time.perf_counter()
+    active = np.nonzero(~inside_solid_objects(scene, flat, solid_objects(scene)))[0]
+    inside_s = time.perf_counter() - t
+    state.update(stage="context", load_s=load_s, inside_s=inside_s, cells=grid.num_cells, active_cells=len(active))
+    _write(progress_file, state)
+    t = time.perf_counter()
+    ctx = build_tx_context(scene, np.array([MUNICH_TX]), opts)
+    context_s = time.perf_counter() - t
+    context_rss = peak_rss_bytes()
+    state.update(stage="tile", context_s=context_s, context_peak_rss_bytes=context_rss,
+                 context_stats={k: int(v) for k, v in ctx.stats.items()})
+    _write(progress_file, state)
+    mid = len(active) // 2
+    rx = flat[active[mid : mid + cells]]
+    t = time.perf_counter()
+    batches, stats = trace_tile(scene, ctx, rx)
+    tile_s = time.perf_counter() - t
+    n_workers = default_workers() if workers is None else workers
+    tiles_s = tile_s * len(active) / len(rx) / max(n_workers, 1)
+    out = {"load_s": load_s, "inside_s": inside_s, "context_s": context_s, "context_peak_rss_bytes": context_rss,
+           "context_stats": {k: int(v) for k, v in ctx.stats.items()}, "sample_cells": len(rx), "tile_s": tile_s,
+           "tile_stats": {k: int(v) for k, v in stats.items()}, "paths": int(sum(len(b.tx_index) for b in batches)),
+           "active_cells": int(len(active)), "workers": n_workers,
+           "extrapolated_map_s": load_s + inside_s + context_s + tiles_s, "peak_rss_bytes": peak_rss_bytes()}
+    state.update(stage="done", **{k: out[k] for k in ("tile_s", "extrapolated_map_s")})
+    _write(progress_file, state)
+    return out
+
+
 def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARGET_BYTES, cell_size: float = 2.0,
                options: dict | None = None, probe: bool = True, probe_timeout_s: float = 300.0,
-               progress=print) -> dict:
+               progress=print, sample_first: bool = True, sample_timeout_s: float = 1200.0) -> dict:
     """Run the munich map once in a child process; report how far it got.
 
+    With ``sample_first``, a child first builds the transmitter context and traces one tile
+    (:func:`munich_sample`, limited to ``sample_timeout_s``); the full map runs only when the
+    extrapolated time fits ``timeout_s``, so a hopeless setting costs minutes, not the full
+    limit, and still reports its context (images per order, time, memory) and tile rate.
     When the target settings fail, ``probe`` runs the same map at first order (R1+D0)
     with ``probe_timeout_s``, to measure the rate at which the scene's cells go.
     """
@@ -90,6 +155,35 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
         return {"skipped": "Sionna RT is not installed (its munich scene ships with it)"}
     os.makedirs(out_dir, exist_ok=True)
     pfile = os.path.join(out_dir, "munich_progress.json")
+    sample = None
+    if sample_first:
+        progress(f"munich: context and one tile first (limit {sample_timeout_s:g} s)")
+        sfile = os.path.join(out_dir, "munich_sample_progress.json")
+        rs = run_isolated("wavepaths.bench.munich", "munich_sample",
+                          {"progress_file": sfile, "cell_size": cell_size, "options": options},
+                          timeout_s=sample_timeout_s, memory_limit_bytes=memory_limit)
+        sample = dict(rs["result"]) if rs["ok"] else {"error": rs.get("error"), "timed_out": rs.get("timed_out", False)}
+        sample["wall_s"] = rs["wall_s"]
+        if os.path.exists(sfile):
+            with open(sfile) as f:
+                sample["last_progress"] = json.load(f)
+        est = sample.get("extrapolated_map_s")
+        if est is None or est > timeout_s:
+            why = (f"the sample extrapolates the map to {est:.0f} s, beyond the {timeout_s:g} s limit" if est
+                   else "the sample did not finish")
+            progress(f"munich: full map not run: {why}")
+            out = {"options": options or "target (R2+D2)", "target_s": TARGET_S, "target_bytes": TARGET_BYTES,
+                   "timeout_s": timeout_s, "memory_limit_bytes": memory_limit, "tx": list(MUNICH_TX),
+                   "cell_size_m": cell_size, "finished": False, "meets_target": False, "full_map_skipped": why,
+                   "sample": sample}
+            if probe and options is None:
+                progress("munich: probing first order (R1+D0) to see where the scene stands")
+                out["probe"] = run_munich(out_dir, timeout_s=probe_timeout_s, memory_limit=memory_limit,
+                                          cell_size=cell_size, probe=False, progress=progress,
+                                          options={"max_reflections": 1, "diffraction": True,
+                                                   "diffraction_reflections": 0},
+                                          sample_timeout_s=min(sample_timeout_s, probe_timeout_s))
+            return out
     progress(f"munich: coverage map at {cell_size:g} m cells (limit {timeout_s:g} s, {memory_limit / 2**30:g} GiB)")
     r = run_isolated("wavepaths.bench.munich", "munich_map",
                      {"progress_file": pfile, "cell_size": cell_size, "options": options},
@@ -101,6 +195,8 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
     out = {"options": options or "target (R2+D2)", "target_s": TARGET_S, "target_bytes": TARGET_BYTES, "timeout_s": timeout_s,
            "memory_limit_bytes": memory_limit, "tx": list(MUNICH_TX), "cell_size_m": cell_size,
            "finished": bool(r["ok"]), "wall_s": r["wall_s"], "last_progress": state}
+    if sample is not None:
+        out["sample"] = sample
     if r["ok"]:
         out.update(r["result"])
         out["max_rss_bytes"] = r["max_rss_bytes"]

@@ -53,6 +53,7 @@ WAVEPATHS_SETTINGS = [
     ("R2", 2, False, 0),
     ("R3", 3, False, 0),
     ("R1+D", 1, True, 0),
+    ("R2+D", 2, True, 0),
     ("R2+D1", 2, True, 1),
     ("R3+D1", 3, True, 1),
     ("R3+D2", 3, True, 2),

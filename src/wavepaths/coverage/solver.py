@@ -262,7 +262,7 @@ def coverage(
     shape = grid.shape
     metadata = {
         "scene": scene.source,
-        "trace_options": dataclasses.asdict(opts),
+        "trace_options": opts.to_dict(),
         "field_config": dataclasses.asdict(cfg),
         "coverage_options": dataclasses.asdict(cov),
         "workers": workers,

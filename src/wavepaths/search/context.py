@@ -3,10 +3,13 @@
 A :class:`TxContext` holds, for a set of transmitters:
 
 * the image tree up to the highest reflection order any path type needs;
+* the beams of the reflection orders' chains, in trees (:class:`~wavepaths.search.beams.ChainBeams`)
+  that each receiver tile queries to back-trace only the chains whose last leg can reach it;
 * for diffraction, every (image source, dihedron) pair whose source lies in a
-  diffracting sector of the dihedron (wider than pi). Whether a source can start a
-  diffracted path from an edge does not depend on the receiver nor on where on the
-  edge the path lands, so the other pairs are dropped here, once.
+  diffracting sector of the dihedron (wider than pi) and, for an image of order >= 1,
+  whose edge lies beyond the image's last mirror and inside its beam (the incident leg
+  leaves that mirror). Neither depends on the receiver nor on where on the edge the path
+  lands, so the other pairs are dropped here, once (``*_culled_beam`` counts the second).
 
 The context is all a coverage tile needs besides the scene; it is what a Dask worker
 receives once (see :mod:`wavepaths.coverage`).
@@ -15,11 +18,12 @@ receives once (see :mod:`wavepaths.coverage`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
 from ..topology.sectors import SectorTable, sector_of, sector_table
+from .beams import Apertures, ChainBeams, build_chain_beams, chains_meeting_edges, edge_tree, scene_apertures
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
 
@@ -63,11 +67,35 @@ class TxContext:
     diffraction_sources: list[DiffractionSources]
     key_stride: int
     stats: dict = field(default_factory=dict)
+    beams: list = field(default_factory=list)
+    apertures: Apertures | None = None
 
 
 def _group(keys: np.ndarray):
     uk, start, count = np.unique(keys, return_index=True, return_counts=True)
     return uk, start.astype(np.int64), count.astype(np.int64)
+
+
+PAIR_BLOCK = 1 << 21  # (image, dihedron) pairs given the sector test at once
+
+
+def _source_pairs(
+    scene: "Scene", lv: ImageLevel, diffracting: np.ndarray, edges, apertures: Apertures | None, cull: bool
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Blocks of (chain, dihedron) pairs of one order that may start a diffracted path.
+
+    Order 0 (the transmitters), or without ``cull``: every pair. Order ``a >= 1``: only the
+    pairs whose edge the chain's last leg can reach (beyond its last mirror, inside the beams
+    through its mirrors: :func:`~wavepaths.search.beams.chains_meeting_edges`); the others
+    cannot carry a diffracted path whose incident leg leaves the last mirror, so none is lost.
+    """
+    if lv.order == 0 or not cull or apertures is None:
+        per = max(1, PAIR_BLOCK // max(len(diffracting), 1))
+        for s in range(0, len(lv), per):
+            r = np.arange(s, min(len(lv), s + per))
+            yield np.repeat(r, len(diffracting)), np.tile(diffracting, len(r))
+        return
+    yield from chains_meeting_edges(scene, lv, apertures, edges)
 
 
 def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> TxContext:
@@ -76,8 +104,15 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
     max_order = options.max_reflections
     if options.diffraction:
         max_order = max(max_order, options.diffraction_reflections)
-    levels = build_image_levels(scene, tx, max_order, options.skip_absorbers)
-    stats = {f"images_order_{k}": len(lv) for k, lv in enumerate(levels)}
+    stats: dict = {}
+    levels = build_image_levels(scene, tx, max_order, options.skip_absorbers, stats)
+    stats.update({f"images_order_{k}": len(lv) for k, lv in enumerate(levels)})
+    # beam trees of the reflection orders, for the per-tile culling of (receiver, chain) pairs
+    apertures = scene_apertures(scene) if max_order >= 1 else None
+    beams: list[ChainBeams | None] = [None] + [
+        build_chain_beams(scene, levels[k], apertures.centre, apertures.radius) if len(levels[k]) else None
+        for k in range(1, options.max_reflections + 1)
+    ]
     # a scene traced without diffraction never builds its dihedra
     diffracting = np.nonzero(scene.dihedra.diffracting)[0] if options.diffraction else np.zeros(0, np.int64)
     stats["dihedra_diffracting"] = int(len(diffracting))
@@ -88,18 +123,25 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
         dihedra = scene.dihedra
         sectors = sector_table(dihedra)
         stride = int(sectors.angles.shape[1]) + 1
+        edges = edge_tree(scene, diffracting)
         for a in range(options.diffraction_reflections + 1):
             lv = levels[a]
-            c = np.repeat(np.arange(len(lv)), len(diffracting))
-            d = np.tile(diffracting, len(lv))
-            sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
-            keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-            stats[f"diffraction_sources_order_{a}_considered"] = int(len(c))
-            stats[f"diffraction_sources_order_{a}_kept"] = int(keep.sum())
-            c, d, sec = c[keep], d[keep], sec[keep]
+            tested = 0
+            kept_c, kept_d, kept_s = [], [], []
+            for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, "source_beam" not in options.disable_culling):
+                tested += len(c)
+                sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
+                keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+                kept_c.append(c[keep])
+                kept_d.append(d[keep])
+                kept_s.append(sec[keep])
+            c, d, sec = (np.concatenate(x) if x else np.zeros(0, np.int64) for x in (kept_c, kept_d, kept_s))
+            stats[f"diffraction_sources_order_{a}_considered"] = len(lv) * len(diffracting)
+            stats[f"diffraction_sources_order_{a}_culled_beam"] = len(lv) * len(diffracting) - tested
+            stats[f"diffraction_sources_order_{a}_kept"] = int(len(c))
             key = d * stride + sec
-            o = np.argsort(key, kind="stable")
+            o = np.lexsort((c, key))
             c, d, key = c[o], d[o], key[o]
             uk, start, count = _group(key)
             sources.append(DiffractionSources(c, d, key, uk, start, count))
-    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats)
+    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures)

@@ -21,12 +21,13 @@ it complete (no valid path is lost) while dropping sequences that cannot carry a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
 from ..errors import WavepathsError
 from ..scene.closed import points_inside_closed
+from .beams import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree
 from .geometry import mirror_points, segment_plane_intersection
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -98,10 +99,182 @@ def source_inside_objects(scene: "Scene", sources: np.ndarray) -> np.ndarray:
     return points_inside_closed(scene, sources)
 
 
+PARENT_CHUNK = 1 << 15  # parent chains whose beams are queried together
+CANDIDATE_BLOCK = 1 << 20  # (chain, mirror) candidates tested at once
+
+
+def _admissible(
+    scene: "Scene", k: int, lv: ImageLevel, chain: np.ndarray, q: np.ndarray, centre: np.ndarray,
+    radius: np.ndarray, inside: np.ndarray, tol: float,
+) -> np.ndarray:
+    """(m,) bool: which candidates (parent chain, mirror ``q``) of order ``k`` are kept.
+
+    The tests of :func:`build_image_levels_all_pairs`, expression for expression (so both
+    builders keep exactly the same chains): the parent image off ``q``'s plane; closed
+    objects reflect from outside only; for ``k >= 2``, ``q`` reaches the half-space the wave
+    travels in after the parent's last mirror ``p``, is not ``p`` nor coplanar with it, and
+    its bounding sphere meets the beam from the parent image through ``p``'s sphere.
+    """
+    n = scene.polygon_normal
+    d = scene.polygon_offset
+    outward = scene.outward_sign
+    parent = lv.last[chain]
+    side = np.einsum("ij,ij->i", parent, n[q]) - d[q]
+    keep = np.abs(side) > (tol if k >= 2 else 1e-12 * scene.diagonal)
+    two_sided = (outward[q] == 0) | inside[lv.source[chain], scene.polygon_object[q]]
+    keep &= two_sided | (outward[q] * side > 0)
+    if k >= 2:
+        p = lv.polygons[chain, -1]
+        before = lv.images[chain, -2]
+        side = np.sign(np.einsum("ij,ij->i", before, n[p]) - d[p])
+        reach = side * (np.einsum("ij,ij->i", centre[q], n[p]) - d[p]) > -radius[q]
+        same_plane = (np.abs(np.einsum("ij,ij->i", n[p], n[q])) > 1 - 1e-12) & (
+            np.abs(np.einsum("ij,ij->i", centre[q], n[p]) - d[p]) <= tol
+        )
+        keep &= reach & ~same_plane & (q != p)
+        keep &= beam_meets_spheres(parent, centre[p], radius[p], centre[q], radius[q])
+    return keep
+
+
+def _candidates(
+    scene: "Scene", k: int, lv: ImageLevel, rows: np.ndarray, mirrors: np.ndarray, tree: SphereTree,
+    centre: np.ndarray, radius: np.ndarray,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Blocks of (parent chain, mirror) candidates of order ``k`` for the parents ``rows``.
+
+    Order 1: every mirror. Order ``k >= 2``: the mirrors whose path of nodes in ``tree``
+    passes the parent's half-space and beam tests on the nodes' bounding spheres (see
+    :func:`~wavepaths.search.beams.query_tree`). Both tests are monotone in the sphere and
+    the nodes' spheres contain their items' spheres (with margins far above rounding), so
+    every mirror that :func:`_admissible` would keep is a candidate.
+    """
+    if k == 1:
+        per = max(1, CANDIDATE_BLOCK // max(len(mirrors), 1))
+        for s in range(0, len(rows), per):
+            r = rows[s : s + per]
+            yield np.repeat(r, len(mirrors)), np.tile(mirrors, len(r))
+        return
+    n = scene.polygon_normal
+    d = scene.polygon_offset
+    p = lv.polygons[rows, -1]
+    apex = lv.last[rows]
+    before = lv.images[rows, -2]
+    side = np.sign(np.einsum("ij,ij->i", before, n[p]) - d[p])
+    pc, pr, pn, pd = centre[p], radius[p], n[p], d[p]
+    margin = 1e-9 * scene.diagonal
+    start = int(rows[0])
+
+    def node_test(r: np.ndarray, level: int, nodes: np.ndarray) -> np.ndarray:
+        c, rad = tree.centre[level][nodes], tree.radius[level][nodes]
+        i = r - start
+        ok = side[i] * (np.einsum("ij,ij->i", c, pn[i]) - pd[i]) > -rad - margin
+        j = np.nonzero(ok)[0]
+        ok[j] = beam_meets_spheres(apex[i[j]], pc[i[j]], pr[i[j]], c[j], rad[j], NODE_ANGLE_SLACK)
+        return ok
+
+    yield from query_tree(tree, rows, node_test, CANDIDATE_BLOCK // max(tree.leaf_size, tree.branch))
+
+
 def build_image_levels(
-    scene: "Scene", sources: np.ndarray, max_order: int, skip_absorbers: bool = True
+    scene: "Scene", sources: np.ndarray, max_order: int, skip_absorbers: bool = True, stats: dict | None = None
 ) -> list[ImageLevel]:
     """Image chains of orders ``0..max_order`` for each source point.
+
+    The chains are those of :func:`build_image_levels_all_pairs` (the same set, in the same
+    order), found without testing every (chain, mirror) pair: the mirrors are held in a
+    :class:`~wavepaths.search.beams.SphereTree` of their bounding spheres, and each parent
+    chain of order ``k - 1`` queries it with its half-space and its beam (the cone from its
+    image through its last mirror's bounding sphere); only the mirrors found go through the
+    exact tests (:func:`_admissible`). Parents are processed in chunks of ``PARENT_CHUNK``
+    and candidates in blocks of about ``CANDIDATE_BLOCK``, so the working memory is bounded
+    by the tree being built.
+
+    Parameters
+    ----------
+    scene : Scene
+    sources : (s, 3) float64
+        Source points [m] (transmitters, or receivers for the receiver side).
+    max_order : int
+    skip_absorbers : bool
+    stats : dict, optional
+        Receives ``images_order_{k}_candidates`` (candidates given the exact tests).
+
+    Returns
+    -------
+    list of ImageLevel
+        ``levels[k]`` holds the chains of order ``k``; level 0 is the sources themselves
+        (``images`` of shape (s, 1, 3), ``polygons`` of shape (s, 0)).
+
+    Raises
+    ------
+    WavepathsError
+        When an order holds more than ``MAX_IMAGES`` chains.
+    """
+    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
+    s = len(sources)
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    levels = [ImageLevel(np.arange(s), np.zeros((s, 0), np.int64), sources[:, None, :].copy())]
+    if max_order == 0:
+        return levels
+    centre, radius = scene.polygon_spheres
+    mirrors = np.nonzero(reflecting_polygons(scene, skip_absorbers))[0]
+    tree = build_sphere_tree(centre[mirrors], radius[mirrors], mirrors)
+    inside = source_inside_objects(scene, sources)  # decided per source, never for the whole batch
+    num_p = max(scene.num_polygons, 1)
+    for k in range(1, max_order + 1):
+        lv = levels[-1]
+        kept_chain, kept_q = [], []
+        total = tested = 0
+        for s0 in range(0, len(lv), PARENT_CHUNK):
+            rows = np.arange(s0, min(len(lv), s0 + PARENT_CHUNK), dtype=np.int64)
+            got_c, got_q = [], []
+            for chain, q in _candidates(scene, k, lv, rows, mirrors, tree, centre, radius):
+                tested += len(chain)
+                keep = _admissible(scene, k, lv, chain, q, centre, radius, inside, tol)
+                got_c.append(chain[keep])
+                got_q.append(q[keep])
+                total += int(keep.sum())
+                if total > MAX_IMAGES:
+                    raise WavepathsError(
+                        f"the image tree of order {k} holds more than {MAX_IMAGES:,} chains: lower "
+                        f"`max_reflections` (or `diffraction_reflections`) or simplify the scene"
+                    )
+            if got_c:
+                c = np.concatenate(got_c)
+                q = np.concatenate(got_q)
+                o = np.argsort(c * num_p + q, kind="stable")
+                kept_chain.append(c[o])
+                kept_q.append(q[o])
+        if stats is not None:
+            stats[f"images_order_{k}_candidates"] = stats.get(f"images_order_{k}_candidates", 0) + tested
+        chain = np.concatenate(kept_chain) if kept_chain else np.zeros(0, np.int64)
+        q = np.concatenate(kept_q) if kept_q else np.zeros(0, np.int64)
+        levels.append(_extend(scene, lv, chain, q))
+    return levels
+
+
+def _extend(scene: "Scene", lv: ImageLevel, chain: np.ndarray, q: np.ndarray) -> ImageLevel:
+    """The level of order ``k + 1``: chains ``chain`` of ``lv`` extended by mirrors ``q`` (in blocks)."""
+    m, k = len(chain), lv.order
+    polygons = np.empty((m, k + 1), np.int64)
+    images = np.empty((m, k + 2, 3), np.float64)
+    for s in range(0, m, CANDIDATE_BLOCK):
+        c, qq = chain[s : s + CANDIDATE_BLOCK], q[s : s + CANDIDATE_BLOCK]
+        polygons[s : s + len(c), :k] = lv.polygons[c]
+        polygons[s : s + len(c), k] = qq
+        images[s : s + len(c), : k + 1] = lv.images[c]
+        images[s : s + len(c), k + 1] = mirror_points(lv.last[c], scene.polygon_normal[qq], scene.polygon_offset[qq])
+    return ImageLevel(source=lv.source[chain], polygons=polygons, images=images)
+
+
+def build_image_levels_all_pairs(
+    scene: "Scene", sources: np.ndarray, max_order: int, skip_absorbers: bool = True
+) -> list[ImageLevel]:
+    """Reference builder: every (chain, mirror) pair of each order tested, then pruned.
+
+    Kept unchanged as the reference that :func:`build_image_levels` must equal (same chains,
+    same order); it holds ``chains x mirrors`` candidates at once, so it is for small scenes
+    and tests only.
 
     Parameters
     ----------

@@ -7,6 +7,14 @@ from dataclasses import dataclass, replace
 from ..errors import WavepathsError
 
 
+CULLING_TESTS: dict[str, str] = {
+    "keller_cone": "per receiver chunk, (source, dihedron) pairs whose Keller cones miss the chunk's sphere",
+    "receiver_mirror_side": "(receiver image, dihedron) pairs whose edge lies behind the image's last mirror",
+    "receiver_beam": "(receiver image, dihedron) pairs whose edge lies outside the image's beam",
+}
+"""The conservative culling tests that :attr:`TraceOptions.disable_culling` can switch off."""
+
+
 @dataclass(frozen=True)
 class TraceOptions:
     """Which propagation mechanisms to search for, and up to which order.
@@ -42,6 +50,10 @@ class TraceOptions:
         peak gains). The dropped paths are counted in ``stats`` (``pruned_paths``); their
         total power changes the power-sum path gain relative to free space by at most
         ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
+    disable_culling : frozenset of str
+        Conservative culling tests to switch off, for measuring what each one saves
+        (``wavepaths bench``'s skip benchmark); every name in :data:`CULLING_TESTS`. They
+        never change the paths found, only the time taken: the benchmark checks that.
     """
 
     los: bool = True
@@ -52,8 +64,13 @@ class TraceOptions:
     skip_absorbers: bool = True
     rx_batch: int = 256
     prune_db: float | None = None
+    disable_culling: frozenset = frozenset()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "disable_culling", frozenset(self.disable_culling))
+        unknown = self.disable_culling - set(CULLING_TESTS)
+        if unknown:
+            raise WavepathsError(f"unknown culling tests {sorted(unknown)}; known: {sorted(CULLING_TESTS)}")
         if self.prune_db is not None and not self.prune_db > 0:
             raise WavepathsError(f"`prune_db` must be positive or None, got {self.prune_db}")
         if not 0 <= self.max_reflections <= 6:
@@ -62,6 +79,12 @@ class TraceOptions:
             raise WavepathsError(f"`diffraction_reflections` must be in 0..4, got {self.diffraction_reflections}")
         if self.rx_batch < 1:
             raise WavepathsError(f"`rx_batch` must be positive, got {self.rx_batch}")
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields (``disable_culling`` as a sorted list)."""
+        d = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        d["disable_culling"] = sorted(self.disable_culling)
+        return d
 
     def with_(self, **changes) -> "TraceOptions":
         """A copy with some fields changed."""

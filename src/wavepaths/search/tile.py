@@ -16,7 +16,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..topology.sectors import FACE_ANGLE_TOL
+from .beams import reflection_candidates
 from .context import TxContext
+from .geometry import diffraction_point_reduced
 from .images import ImageLevel, backtrace, build_image_levels
 from .paths import InteractionType, PathBatch
 
@@ -58,6 +60,11 @@ def _lift_diffraction(scene: "Scene", points: np.ndarray, dihedron: np.ndarray, 
     return points + 2 * scene.length_tolerance(scene.tolerances.ray_offset) * bis
 
 
+def _leg_order(legs: int) -> list[int]:
+    """Legs of a chain in casting order: the last (to the receiver), the first, then the others."""
+    return list(dict.fromkeys([legs - 1, 0, *range(1, legs - 1)]))
+
+
 def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None,
                      cast: np.ndarray | None = None) -> np.ndarray:
     """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked.
@@ -80,10 +87,17 @@ def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact
         degenerate |= (seg[:, [0, -1]] <= plane_tolerance(scene)).any(axis=1)
     # the true vertices: by the casters' rule (wavepaths.raycast) an end on a surface does not
     # hit it, and a face next to it still blocks (``cast``, a lifted copy, is not used)
-    a = vertices[:, :-1].reshape(-1, 3)
-    b = vertices[:, 1:].reshape(-1, 3)
-    blocked = scene.raycaster.occluded(a, b).reshape(k, s - 1)
-    stats["rays_cast"] += a.shape[0]
+    # one leg at a time, each cast only for the chains still clear (compaction): the leg to
+    # the receiver first (most often blocked), then from the transmitter, then the inner ones
+    blocked = np.zeros((k, s - 1), dtype=bool)
+    alive = np.nonzero(~degenerate)[0]
+    for j in _leg_order(s - 1):
+        if len(alive) == 0:
+            break
+        hit = scene.raycaster.occluded(vertices[alive, j], vertices[alive, j + 1])
+        stats["rays_cast"] += len(alive)
+        blocked[alive[hit], j] = True
+        alive = alive[~hit]
     if exact is not None and exact.any():
         # chains of (tx, rx) pairs that sit on a shadow or reflection boundary: float64 casts
         sel = np.nonzero(exact)[0]
@@ -126,18 +140,20 @@ def los_tile(
 def reflection_tile(
     scene: "Scene", ctx: TxContext, order: int, rx: np.ndarray, rx_offset: int, stats: Counter, grazing: np.ndarray
 ) -> list[PathBatch]:
-    """Specular paths of one order: image method backwards from each receiver."""
+    """Specular paths of one order: image method backwards from each receiver.
+
+    Only the (receiver, chain) pairs whose chain's last-leg beam can reach the receiver are
+    back-traced (:func:`~wavepaths.search.beams.reflection_candidates`; the others are
+    counted in ``reflection_order_{k}_culled_beam``).
+    """
     lv = ctx.levels[order]
     c, n = len(lv), len(rx)
     out = []
     if c == 0 or n == 0:
         return out
-    step = max(1, CANDIDATE_BUDGET // c)
     tag = f"reflection_order_{order}"
-    for s in range(0, n, step):
-        r = np.arange(s, min(n, s + step))
-        ri = np.repeat(r, c)
-        ci = np.tile(np.arange(c), len(r))
+    # (receiver, chain) pairs whose chain's last-leg beam can reach the receiver (beams.py)
+    for ri, ci in reflection_candidates(scene, ctx, order, rx, stats, CANDIDATE_BUDGET):
         stats[f"{tag}_candidates"] += len(ri)
         if ctx.options.prune_db is not None:
             # |a| <= lambda / (4 pi |rx - I_k|) for |Gamma| <= 1: drop chains below the tolerance
@@ -318,7 +334,8 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     w = dihedra.direction[diffr]
     L = dihedra.length[diffr]
     ok = np.ones((len(e_rows), len(diffr)), dtype=bool)
-    if rx_lv.order >= 1:
+    disabled = ctx.options.disable_culling
+    if rx_lv.order >= 1 and "receiver_mirror_side" not in disabled:
         q = rx_lv.polygons[e_rows, -1]
         n, off = scene.polygon_normal[q], scene.polygon_offset[q] - scene.polygon_normal[q] @ c0
         side = np.sign(np.einsum("ij,ij->i", rx_lv.images[e_rows, -2] - c0, n) - off)
@@ -328,6 +345,8 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
         reach = np.maximum(sa, sb) > -tol
         stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += int((~reach).sum())
         ok &= reach
+    if rx_lv.order >= 1 and "receiver_beam" not in disabled:
+        q = rx_lv.polygons[e_rows, -1]
         centre, radius = scene.polygon_spheres
         to_q = centre[q] - c0 - I  # (E, 3)
         dist_q = np.linalg.norm(to_q, axis=1)
@@ -424,7 +443,9 @@ def diffraction_tile(
         e_rows = np.arange(s, min(len(rx_lv), s + step))
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
         # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
-        src = _cull_sources_by_keller_cone(dihedra, src_all, tx_lv.last[src_all.chain], rx_lv.last[e_rows])
+        src = src_all
+        if "keller_cone" not in ctx.options.disable_culling:
+            src = _cull_sources_by_keller_cone(dihedra, src_all, tx_lv.last[src_all.chain], rx_lv.last[e_rows])
         stats[f"{tag}_source_pairs_culled_keller_cone"] += len(src_all.chain) - len(src.chain)
         diffr = np.unique(src.dihedron)
         if len(diffr) == 0:
@@ -451,8 +472,7 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     d = rside.dihedron[rows]
     te, de = tside.t[src_rows], tside.rho[src_rows]
     tr, dr = rside.t[rows], rside.rho[rows]
-    den = de + dr
-    t = np.where(den > 0, (te * dr + tr * de) / np.where(den > 0, den, 1.0), 0.5 * (te + tr))
+    t = diffraction_point_reduced(te, de, tr, dr)
     on = (t >= 0) & (t <= dihedra.length[d])
     stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
     rows, src_rows, d, t = rows[on], src_rows[on], d[on], t[on]
@@ -490,11 +510,7 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     post_polys = rx_lv.polygons[e][:, ::-1]
     rx_pos = rx[rx_lv.source[e]]
     verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
-    cast = verts.copy()
-    _lift_reflections(scene, cast, tx_lv.polygons[c], 1)
-    cast[:, a + 1] = _lift_diffraction(scene, P, d, f0, fn)
-    _lift_reflections(scene, cast, post_polys, a + 2)
-    blocked = _occluded_chains(scene, verts, stats, None, cast)
+    blocked = _occluded_chains(scene, verts, stats)
     stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
     keep = ~blocked
     e, d, c, f0, fn, verts, post_polys = e[keep], d[keep], c[keep], f0[keep], fn[keep], verts[keep], post_polys[keep]

@@ -1,0 +1,51 @@
+"""Every conservative culling test can be switched off, and switching it off finds the same paths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths.errors import WavepathsError
+from wavepaths.scene import load_scene
+from wavepaths.search import TraceOptions, trace
+from wavepaths.search.options import CULLING_TESTS
+
+
+COUNTER = {  # the stats key suffix of what each test rejects
+    "keller_cone": "_source_pairs_culled_keller_cone",
+    "receiver_mirror_side": "_receiver_pairs_rejected_mirror_side",
+    "receiver_beam": "_receiver_pairs_rejected_beam",
+}
+
+
+def path_keys(p):
+    """(tx, rx, interactions, primitives, rounded vertices) of every path, sorted."""
+    keys = []
+    for i in range(len(p)):
+        n = int(p.depth[i])
+        keys.append((int(p.tx_index[i]), int(p.rx_index[i]), tuple(p.interactions[i, :n].tolist()),
+                     tuple(p.primitive[i, :n].tolist()), tuple(np.round(p.vertices[i, : n + 2].ravel(), 6).tolist())))
+    return sorted(keys)
+
+
+@pytest.mark.parametrize("name", sorted(CULLING_TESTS))
+def test_switching_a_culling_test_off_keeps_every_path_and_rejects_nothing_by_it(name, rng):
+    scene = load_scene("street_canyon")
+    # receivers in the street (|y| < 10) and behind the buildings (|y| > 25), tx above the street
+    street = rng.uniform(size=40) < 0.5
+    y = np.where(street, rng.uniform(-9, 9, 40), np.sign(rng.uniform(-1, 1, 40)) * rng.uniform(27, 39, 40))
+    rx = np.column_stack([rng.uniform(-95, 95, 40), y, np.full(40, 1.5)])
+    tx = np.array([[-60.0, 0.0, 10.0]])
+    opts = TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=2, rx_batch=2)
+    on = trace(scene, tx, rx, opts)
+    off = trace(scene, tx, rx, opts.with_(disable_culling={name}))
+    assert len(on) > 0
+    assert path_keys(on) == path_keys(off)
+    culled = {k: v for k, v in on.stats.items() if k.endswith(COUNTER[name])}
+    assert sum(culled.values()) > 0, f"{name} culled nothing here: the test would not show it is safe"
+    assert all(v == 0 for k, v in off.stats.items() if k in culled)
+
+
+def test_unknown_culling_test_is_an_error():
+    with pytest.raises(WavepathsError, match="unknown culling"):
+        TraceOptions(disable_culling={"no_such_test"})
