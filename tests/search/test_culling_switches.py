@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -11,10 +13,12 @@ from wavepaths.search import TraceOptions, trace
 from wavepaths.search.options import CULLING_TESTS
 
 
-COUNTER = {  # the stats key suffix of what each test rejects
-    "keller_cone": "_source_pairs_culled_keller_cone",
-    "receiver_mirror_side": "_receiver_pairs_rejected_mirror_side",
-    "receiver_beam": "_receiver_pairs_rejected_beam",
+COUNTER = {  # the stats keys of what each test rejects
+    "keller_cone": r"diffraction_\dr_\dr_source_pairs_culled_keller_cone",
+    "receiver_mirror_side": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_side",
+    "receiver_beam": r"diffraction_\dr_\dr_receiver_pairs_rejected_beam",
+    "reflection_beam": r"reflection_order_\d_culled_beam",
+    "source_beam": r"diffraction_sources_order_\d_culled_beam",
 }
 
 
@@ -41,7 +45,7 @@ def test_switching_a_culling_test_off_keeps_every_path_and_rejects_nothing_by_it
     off = trace(scene, tx, rx, opts.with_(disable_culling={name}))
     assert len(on) > 0
     assert path_keys(on) == path_keys(off)
-    culled = {k: v for k, v in on.stats.items() if k.endswith(COUNTER[name])}
+    culled = {k: v for k, v in on.stats.items() if re.fullmatch(COUNTER[name], k)}
     assert sum(culled.values()) > 0, f"{name} culled nothing here: the test would not show it is safe"
     assert all(v == 0 for k, v in off.stats.items() if k in culled)
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from .timing import load_average
 
-BENCHMARKS = ("point_search", "sionna_paths", "tradeoff", "scaling", "diffraction_cost")
+BENCHMARKS = ("point_search", "sionna_paths", "tradeoff", "scaling", "diffraction_cost", "skips")
 
 
 def machine_info() -> dict:
@@ -412,6 +412,21 @@ interleaved round by round, and reported as medians over the rounds.</p>
                             ["pair", "off [s]", "on [s]", "ratio", "diffracted paths (on)", "all paths (on)"]))
         parts.append(_img(summary["figures"].get("diffraction_cost")))
 
+    sk = res.get("skips")
+    if sk:
+        parts.append("<h2>6. What each skip saves</h2>")
+        parts.append(f"<p>Benchmark 2's query ({html.escape(sk['scene'])}, {sk['num_rx']} receivers, "
+                     f"{html.escape(_opt_label(sk['options']))}, fields included) with every culling test on, each "
+                     f"switched off in turn (<code>TraceOptions(disable_culling=...)</code>), and all off; rounds "
+                     f"alternate. Same paths in every setting: {_fmt(sk['all_same_paths'])}.</p>")
+        parts.append(_table([[r["setting"], r["time_s"]["median_s"], r["saved_s"], r["saved_fraction"],
+                              r["culled_with_it_on"], r["num_paths"], r["same_paths"], r["description"]]
+                             for r in sk["rows"]],
+                            ["setting", "time [s]", "saved by the test [s]", "share of the time without it",
+                             "pairs it culls", "paths", "same paths", "test"]))
+        parts.append("<p>Counters of the other skips (all on):</p>")
+        parts.append(_table([[k, v] for k, v in sorted(sk["counters_all_on"].items())], ["counter", "value"]))
+
     mu = res.get("munich")
     if mu:
         parts.append("<h2>Scale: munich (optional)</h2>")
@@ -554,6 +569,11 @@ def run_bench(out_dir: str, quick: bool = False, only: list[str] | None = None, 
 
         dc = run_diffraction_cost(quick=quick, progress=progress)
         results["diffraction_cost"] = dc
+        save()
+    if "skips" in names:
+        from .skips import run_skips
+
+        results["skips"] = run_skips(quick=quick, progress=progress)
         save()
     if munich:
         from .munich import run_munich

@@ -11,6 +11,8 @@ CULLING_TESTS: dict[str, str] = {
     "keller_cone": "per receiver chunk, (source, dihedron) pairs whose Keller cones miss the chunk's sphere",
     "receiver_mirror_side": "(receiver image, dihedron) pairs whose edge lies behind the image's last mirror",
     "receiver_beam": "(receiver image, dihedron) pairs whose edge lies outside the image's beam",
+    "reflection_beam": "(receiver, image chain) pairs whose receiver no beam of the chain can reach",
+    "source_beam": "(transmitter image, dihedron) pairs whose edge lies outside the image's beam",
 }
 """The conservative culling tests that :attr:`TraceOptions.disable_culling` can switch off."""
 
