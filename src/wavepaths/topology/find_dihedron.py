@@ -28,6 +28,16 @@ version accepts a path through a solid and this one rejects it.
 
 Vectorised over ``k`` queries; faces are padded to the largest face count among the
 queried dihedra (rarely more than 4, as the seed notes).
+
+**How the path search uses it.** The sectors between an edge's faces are prisms around
+the edge line, so whether E and R (seen from P) lie in one topological volume does not
+depend on where P is on the edge: it is "E and R are in the same sector", and the true
+dihedron is that sector's two faces. The path search therefore evaluates the test once
+per end point and edge (:func:`wavepaths.topology.sectors.sector_angle`) and joins the
+two sides on (dihedron, sector), instead of calling this function per candidate path;
+``tests/topology/test_find_dihedron.py`` checks that both give the same verdicts, faces
+and UTD angles. This function remains the seed's test as written (with the slips fixed),
+used by the tests and the validation report.
 """
 
 from __future__ import annotations
