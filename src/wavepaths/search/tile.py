@@ -309,6 +309,36 @@ def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray
     return np.where(on_face, -1, sec), np.where(on_face, 0.0, width), phi
 
 
+def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
+                           edges, stats: Counter, tag: str) -> _EndSide:
+    """Step 1 of :func:`diffraction_tile` for receiver images of order ``b >= 1``, through the edge tree.
+
+    Seen from the receiver, the legs after the diffraction are a reflected chain from the
+    receiver that ends on the edge: the (image, dihedron) pairs whose last leg can reach
+    the edge are those of :func:`~wavepaths.search.beams.chains_meeting_edges` (beyond the
+    last mirror, inside the beams through the mirrors; a tree query, conservative), the
+    same test as for the transmitter's images. Then the sector, per pair.
+    """
+    from .beams import chains_meeting_edges
+
+    sub = ImageLevel(rx_lv.source[e_rows], rx_lv.polygons[e_rows], rx_lv.images[e_rows])
+    wanted = np.zeros(len(scene.dihedra), dtype=bool)
+    wanted[diffr] = True
+    ch, dd = [], []
+    for c, d in chains_meeting_edges(scene, sub, ctx.apertures, edges):
+        keep = wanted[d]
+        ch.append(c[keep])
+        dd.append(d[keep])
+    e = e_rows[np.concatenate(ch)] if ch else np.zeros(0, np.int64)
+    d = np.concatenate(dd) if dd else np.zeros(0, np.int64)
+    stats[f"{tag}_receiver_pairs_rejected_beam"] += len(e_rows) * len(diffr) - len(e)
+    x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
+    sec, width, phi = _sector_in_table(ctx, d, x, y)
+    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~good).sum())
+    return _EndSide(e[good], d[good], sec[good], phi[good], t[good], np.hypot(x[good], y[good]))
+
+
 def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
                    stats: Counter, tag: str) -> _EndSide:
     """Step 1 of :func:`diffraction_tile`, dense over (receiver images ``e_rows``) x (dihedra ``diffr``).
@@ -406,8 +436,13 @@ def diffraction_tile(
     rx_offset: int,
     stats: Counter,
     grazing: np.ndarray,
+    edges=None,
 ) -> list[PathBatch]:
     """Diffracted paths with ``a`` reflections before and ``b`` after the diffraction.
+
+    ``edges``: a :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
+    (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
+    queries instead of the dense product.
 
     Also marks in ``grazing`` (m, n) the (tx, rx) pairs for which a candidate lies within
     the float32 uncertainty of a shadow or reflection boundary of its edge: the geometrical
@@ -451,7 +486,10 @@ def diffraction_tile(
         if len(diffr) == 0:
             continue
         stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
-        rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag)
+        if b >= 1 and edges is not None and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling:
+            rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag)
+        else:
+            rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag)
         tside = _transmitter_side(scene, ctx, tx_lv, src)
         for rows, src_rows in _join_chunks(src, rside.dihedron * ctx.key_stride + rside.sector):
             out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
@@ -533,9 +571,14 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
         rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers)
+        edges = None
+        if opts.diffraction_reflections >= 1 and ctx.apertures is not None:
+            from .beams import edge_tree
+
+            edges = edge_tree(scene, ctx.diffracting)
         for a in range(opts.diffraction_reflections + 1):
             for b in range(opts.diffraction_reflections + 1 - a):
-                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing)
+                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges)
     if opts.los:
         batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
     for k in range(1, opts.max_reflections + 1):
