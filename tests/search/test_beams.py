@@ -77,7 +77,7 @@ def test_chain_beams_keep_every_pair_that_back_traces(seed):
             assert len(got) < 0.7 * total  # the culling does something
 
 
-def test_beam_tree_query_equals_the_exact_test_on_all_pairs():
+def test_beam_tree_query_keeps_only_exact_passes_and_every_back_traced_pair():
     rng = np.random.default_rng(42)
     scene = random_scene(rng)
     tx = free_point(rng, scene)

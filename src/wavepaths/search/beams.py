@@ -15,11 +15,25 @@ leaf are expanded to its items. A node's sphere contains the spheres of all item
 it, and both tests used on nodes (beam, half-space) can only pass for a larger sphere
 when they pass for a smaller one inside it, so the query returns a superset of the
 items that pass the same test, never fewer.
+
+Uses:
+
+* the image tree (:func:`~wavepaths.search.images.build_image_levels`): the mirrors a
+  parent chain's beam can reach;
+* per receiver tile (:func:`reflection_candidates`): the chains whose last leg can reach
+  a cluster of receivers, from a tree over the chains' beams (:class:`ChainBeams`), then
+  per receiver; the last leg must pass through the rectangles of all the chain's mirrors,
+  unfolded (:func:`chain_apertures`, :func:`chain_beams_meet`);
+* diffraction after reflections (:func:`chains_meeting_edges`): the edges a chain's last
+  leg can end on, from a tree over the edges (:func:`edge_tree`).
+
+Every test keeps a margin above rounding (``NODE_ANGLE_SLACK`` on nodes, ``1e-9`` of the
+scene diagonal and of the distance on planes), so none drops a valid path.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
@@ -188,7 +202,9 @@ def build_sphere_tree(
 NodeTest = Callable[[np.ndarray, int, np.ndarray], np.ndarray]
 
 
-def query_tree(tree: SphereTree, rows: np.ndarray, node_test: NodeTest, budget: int = 1 << 17) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def query_tree(
+    tree: SphereTree, rows: np.ndarray, node_test: NodeTest, budget: int = 1 << 17
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """The (query row, item) pairs whose path of nodes from the root passes ``node_test``.
 
     Parameters
@@ -432,7 +448,9 @@ def chain_beams_meet(
         keep = side * (np.einsum("ij,ij->i", centre, n) - d) < rad + far
     else:
         far = np.maximum(far, 1e-9 * np.linalg.norm(end - apex, axis=1) + eps)
-        keep = (side * (np.einsum("ij,ij->i", centre, n) - d) < far) | (side * (np.einsum("ij,ij->i", end, n) - d) < far)
+        keep = (side * (np.einsum("ij,ij->i", centre, n) - d) < far) | (
+            side * (np.einsum("ij,ij->i", end, n) - d) < far
+        )
     idx = np.nonzero(keep)[0]
     _, _, qd = chain_apertures(scene, level, rows[idx], quads=quads)
     for j in range(k):
@@ -458,8 +476,9 @@ def chain_beams_meet(
 class ChainBeams:
     """A tree over the last-leg beams of one order's image chains.
 
-    The chains are laid out in Morton order of their last image and last mirror's centre; ``apex`` bounds the last images of the chains below each node
-    and ``through[j]`` their ``j``-th apertures' spheres, with one node structure.
+    The chains are laid out in (6-D) Morton order of their last image and their last
+    mirror's centre; ``apex`` bounds the last images of the chains below each node and
+    ``through[j]`` their ``j``-th apertures' spheres, with one node structure.
 
     Attributes
     ----------
@@ -487,7 +506,8 @@ def build_chain_beams(
     order = morton_order(np.concatenate([level.last, cen[:, -1]], axis=1))
     ids = np.arange(m, dtype=np.int64)
     apex = build_sphere_tree(level.last, np.zeros(m), ids, order=order)
-    through = [build_sphere_tree(cen[:, j], rad[:, j], ids, order=order) for j in range(k)]
+    # one node structure: the aperture trees share the apex tree's item array
+    through = [replace(build_sphere_tree(cen[:, j], rad[:, j], ids, order=order), items=apex.items) for j in range(k)]
     return ChainBeams(apex, through)
 
 

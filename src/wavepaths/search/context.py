@@ -128,7 +128,8 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             lv = levels[a]
             tested = 0
             kept_c, kept_d, kept_s = [], [], []
-            for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, "source_beam" not in options.disable_culling):
+            cull = "source_beam" not in options.disable_culling
+            for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, cull):
                 tested += len(c)
                 sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
                 keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)

@@ -16,6 +16,11 @@ it complete (no valid path is lost) while dropping sequences that cannot carry a
 * the reflected wave seems to come from the image ``I`` through ``p``, so ``q`` must meet
   the cone from ``I`` that contains ``p``'s bounding sphere (a beam test on bounding
   spheres: conservative, hence complete).
+
+:func:`build_image_levels` finds the candidate mirrors of each parent chain in a tree of
+the mirrors' bounding spheres (:mod:`wavepaths.search.beams`), queried with the parent's
+half-space and beam, instead of testing every (chain, mirror) pair; it keeps exactly the
+chains of :func:`build_image_levels_all_pairs` (the reference, for tests), in the same order.
 """
 
 from __future__ import annotations
