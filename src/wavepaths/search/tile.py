@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..topology.sectors import FACE_ANGLE_TOL
+from ..topology.sectors import sector_lookup
 from .beams import reflection_candidates
 from .context import TxContext
 from .geometry import diffraction_point_reduced
@@ -284,29 +284,9 @@ class _EndSide:
     rho: np.ndarray
 
 
-def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray, tol: float = FACE_ANGLE_TOL):
-    """Sector, width and angle-in-sector of edge-frame coordinates ``(x, y)`` around edges ``d``.
-
-    ``d`` has shape (k,) and ``x``, ``y`` shape (k,) or (e, k) (dense receiver side: the
-    edge tables broadcast, nothing is gathered per pair). Same decisions as
-    :func:`~wavepaths.topology.sectors.sector_angle`: within ``tol`` of a bounding face,
-    or on the edge line, the sector is -1.
-    """
-    tab = ctx.sectors
-    theta = np.arctan2(y, x)
-    theta += np.where(theta < 0, 2 * np.pi, 0.0)
-    ang = tab.angles[d]  # (k, m), broadcast against theta's leading axes
-    below = np.zeros(theta.shape, dtype=np.int64)
-    for j in range(ang.shape[1]):  # m <= a few faces: a loop over slots, not over pairs
-        below += ang[:, j] <= theta
-    sec = np.mod(below - 1, tab.count[d])
-    cols = np.arange(len(d))
-    start = ang[cols, sec] if theta.ndim == 1 else ang[cols[None, :], sec]
-    width = tab.width[d][cols, sec] if theta.ndim == 1 else tab.width[d][cols[None, :], sec]
-    phi = theta - start
-    phi += np.where(phi < 0, 2 * np.pi, 0.0)
-    on_face = (phi < tol) | (width - phi < tol) | ((x == 0) & (y == 0))
-    return np.where(on_face, -1, sec), np.where(on_face, 0.0, width), phi
+def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray):
+    """:func:`~wavepaths.topology.sectors.sector_lookup` on the context's sector table."""
+    return sector_lookup(ctx.sectors, d, x, y)
 
 
 def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,

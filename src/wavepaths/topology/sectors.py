@@ -118,15 +118,32 @@ def sector_angle(table: SectorTable, dihedron: np.ndarray, points: np.ndarray, o
     v = points - origin
     x = np.einsum("ij,ij->i", v, table.x_hat[dihedron])
     y = np.einsum("ij,ij->i", v, table.y_hat[dihedron])
-    theta = np.mod(np.arctan2(y, x), 2 * np.pi)
-    angles = table.angles[dihedron]
-    below = (angles <= theta[:, None]).sum(axis=1)
-    sector = np.mod(below - 1, table.count[dihedron])
-    rows = np.arange(len(dihedron))
-    finite = np.isfinite(angles)
-    near = np.abs(np.where(finite, angles, 0.0) - theta[:, None])
-    near = np.where(finite, np.minimum(near, 2 * np.pi - near), np.inf)
-    on_face = (near < tol).any(axis=1) | (np.hypot(x, y) == 0)
-    width = table.width[dihedron, sector]
-    phi = np.mod(theta - angles[rows, sector], 2 * np.pi)
-    return np.where(on_face, -1, sector), np.where(on_face, 0.0, width), np.where(on_face, 0.0, phi)
+    sector, width, phi = sector_lookup(table, dihedron, x, y, tol)
+    return sector, width, np.where(sector < 0, 0.0, phi)
+
+
+def sector_lookup(table: SectorTable, dihedron: np.ndarray, x: np.ndarray, y: np.ndarray,
+                  tol: float = FACE_ANGLE_TOL):
+    """Sector, width and angle-in-sector of edge-frame coordinates ``(x, y)`` around ``dihedron``.
+
+    The kernel of :func:`sector_angle`, shared with the path search. ``dihedron`` has shape
+    (k,) and ``x``, ``y`` (along ``x_hat`` and ``y_hat``) shape (k,) or (e, k): the edge
+    tables broadcast over the leading axis (the search's dense receiver side), nothing is
+    gathered per pair. Within ``tol`` of a bounding face, or on the edge line, the sector is
+    -1 (and its width 0). Only the sector's two bounding faces can be the nearest ones, so
+    that test needs no loop over the faces.
+    """
+    theta = np.arctan2(y, x)
+    theta += np.where(theta < 0, 2 * np.pi, 0.0)
+    ang = table.angles[dihedron]  # (k, m), broadcast against theta's leading axes
+    below = np.zeros(theta.shape, dtype=np.int64)
+    for j in range(ang.shape[1]):  # m: a few faces; a loop over face slots, not over points
+        below += ang[:, j] <= theta
+    sec = np.mod(below - 1, table.count[dihedron])
+    cols = np.arange(len(dihedron)) if theta.ndim == 1 else np.arange(len(dihedron))[None, :]
+    start = ang[cols, sec]
+    width = table.width[dihedron][cols, sec]
+    phi = theta - start
+    phi += np.where(phi < 0, 2 * np.pi, 0.0)
+    on_face = (phi < tol) | (width - phi < tol) | ((x == 0) & (y == 0))
+    return np.where(on_face, -1, sec), np.where(on_face, 0.0, width), phi
