@@ -30,10 +30,12 @@ class SceneTolerances:
         A point lies in a plane when within ``plane_distance * diagonal`` of it (used to
         find edges lying inside another object's face).
     ray_offset : float
-        Segments cast through Embree are shortened by ``ray_offset * diagonal`` at both
-        ends, so that a segment starting or ending on a surface does not hit that
-        surface. Embree works in float32 on recentred coordinates, whose resolution is
-        about 6e-8 of the scene half-size; 1e-6 is 30 times that.
+        The float32 uncertainty budget of the ray casts, relative to the diagonal. Embree
+        works in float32 on recentred coordinates, whose resolution is about 6e-8 of the
+        scene half-size; 1e-6 is 30 times that. Casts are no longer shortened (every hit is
+        decided in float64, :mod:`wavepaths.raycast`); the value sets how close to an edge
+        a geometrical-optics ray counts as grazing: within ``4 ray_offset`` its (tx, rx)
+        pair is re-cast in float64 and the UTD boundary side follows the search's decision.
     """
 
     weld: float = 1e-6

@@ -28,45 +28,12 @@ if TYPE_CHECKING:  # pragma: no cover
 CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~100 MB)
 
 
-def _lift_reflections(scene: "Scene", verts: np.ndarray, polys: np.ndarray, first: int) -> None:
-    """Move reflection points (vertices ``first .. first + k - 1``) off their planes, in place.
-
-    Both legs of a reflection lie on one side of the mirror: the point is lifted toward that
-    side by ``2 ray_offset``, so that a leg grazing the mirror does not hit it in float32.
-    """
-    lift = 2 * scene.length_tolerance(scene.tolerances.ray_offset)
-    for j in range(polys.shape[1]):
-        v = first + j
-        n = scene.polygon_normal[polys[:, j]]
-        side = np.sign(np.einsum("ij,ij->i", verts[:, v - 1] - verts[:, v], n))
-        verts[:, v] += (lift * side)[:, None] * n
-
-
-def _lift_diffraction(scene: "Scene", points: np.ndarray, dihedron: np.ndarray, face_0: np.ndarray,
-                      face_n: np.ndarray) -> np.ndarray:
-    """Diffraction points moved off their edge along the bisector of the true dihedron's sector.
-
-    The legs leave the edge inside that sector, possibly grazing one of its faces; starting
-    them ``2 ray_offset`` inside the sector keeps float32 casts from hitting those faces.
-    """
-    dih = scene.dihedra
-    w = dih.direction[dihedron]
-    x = dih.face_direction[face_0]
-    y = np.cross(w, x)
-    pn = dih.face_direction[face_n]
-    ang = np.mod(np.arctan2(np.einsum("ij,ij->i", pn, y), np.einsum("ij,ij->i", pn, x)), 2 * np.pi)
-    ang = np.where(ang < 1e-9, 2 * np.pi, ang)
-    bis = np.cos(ang / 2)[:, None] * x + np.sin(ang / 2)[:, None] * y
-    return points + 2 * scene.length_tolerance(scene.tolerances.ray_offset) * bis
-
-
 def _leg_order(legs: int) -> list[int]:
     """Legs of a chain in casting order: the last (to the receiver), the first, then the others."""
     return list(dict.fromkeys([legs - 1, 0, *range(1, legs - 1)]))
 
 
-def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None,
-                     cast: np.ndarray | None = None) -> np.ndarray:
+def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None) -> np.ndarray:
     """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked.
 
     A chain with a degenerate segment (shorter than the weld tolerance: two interactions
@@ -86,7 +53,7 @@ def _occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact
 
         degenerate |= (seg[:, [0, -1]] <= plane_tolerance(scene)).any(axis=1)
     # the true vertices: by the casters' rule (wavepaths.raycast) an end on a surface does not
-    # hit it, and a face next to it still blocks (``cast``, a lifted copy, is not used)
+    # hit it, and a face next to it still blocks (no lifted or shortened copies)
     # one leg at a time, each cast only for the chains still clear (compaction): the leg to
     # the receiver first (most often blocked), then from the transmitter, then the inner ones
     blocked = np.zeros((k, s - 1), dtype=bool)
@@ -171,9 +138,7 @@ def reflection_tile(
         stats[f"{tag}_rejected_outside_polygon"] += rej["outside_polygon"]
         ri, ci = ri[ok], ci[ok]
         verts = np.concatenate([lv.images[ci, :1], pts, rx[ri][:, None, :]], axis=1)
-        cast = verts.copy()
-        _lift_reflections(scene, cast, lv.polygons[ci], 1)
-        blocked = _occluded_chains(scene, verts, stats, grazing[lv.source[ci], ri], cast)
+        blocked = _occluded_chains(scene, verts, stats, grazing[lv.source[ci], ri])
         stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
         keep = ~blocked
         ri, ci, verts = ri[keep], ci[keep], verts[keep]
