@@ -10,23 +10,8 @@ from wavepaths.scene import load_scene
 from wavepaths.search.beams import chain_beams_meet, chains_meeting_edges, edge_tree, scene_apertures
 from wavepaths.search.context import build_tx_context
 
+from .helpers import path_keys
 from .test_completeness import free_point, random_scene
-
-
-def path_keys(p):
-    keys = []
-    for i in range(len(p)):
-        n = int(p.depth[i])
-        keys.append((int(p.tx_index[i]), int(p.rx_index[i]), tuple(p.interactions[i, :n].tolist()),
-                     tuple(p.primitive[i, :n].tolist()), tuple(np.round(p.vertices[i, : n + 2].ravel(), 6).tolist())))
-    return sorted(keys)
-
-
-def without(opts: TraceOptions, *names: str) -> TraceOptions:
-    """``opts`` with beam culling tests switched off (names not yet in CULLING_TESTS: set directly)."""
-    o = opts.with_()
-    object.__setattr__(o, "disable_culling", frozenset(opts.disable_culling) | set(names))
-    return o
 
 
 def scenes():
@@ -48,7 +33,7 @@ def test_beam_culling_finds_the_same_paths(case):
     scene, tx, rx = scenes()[case]
     opts = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2, rx_batch=5)
     on = trace(scene, tx, rx, opts)
-    off = trace(scene, tx, rx, without(opts, "reflection_beam", "source_beam"))
+    off = trace(scene, tx, rx, opts.with_(disable_culling={"reflection_beam", "source_beam"}))
     assert len(on) > 0
     assert path_keys(on) == path_keys(off)
     assert on.stats.get("reflection_order_2_culled_beam", 0) > 0
@@ -57,7 +42,7 @@ def test_beam_culling_finds_the_same_paths(case):
     assert off.stats.get("diffraction_sources_order_1_culled_beam", 0) == 0
     # the culled source pairs are a subset of the unculled ones, in the same sorted layout
     a = build_tx_context(scene, tx, opts)
-    b = build_tx_context(scene, tx, without(opts, "source_beam"))
+    b = build_tx_context(scene, tx, opts.with_(disable_culling={"source_beam"}))
     for sa, sb in zip(a.diffraction_sources, b.diffraction_sources):
         pa = set(zip(sa.chain.tolist(), sa.dihedron.tolist()))
         assert pa <= set(zip(sb.chain.tolist(), sb.dihedron.tolist()))

@@ -10,26 +10,9 @@ import pytest
 from wavepaths.errors import WavepathsError
 from wavepaths.scene import load_scene
 from wavepaths.search import TraceOptions, trace
-from wavepaths.search.options import CULLING_TESTS
+from wavepaths.search.options import CULLING_COUNTERS, CULLING_TESTS
 
-
-COUNTER = {  # the stats keys of what each test rejects
-    "keller_cone": r"diffraction_\dr_\dr_source_pairs_culled_keller_cone",
-    "receiver_mirror_side": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_side",
-    "receiver_beam": r"diffraction_\dr_\dr_receiver_pairs_rejected_beam",
-    "reflection_beam": r"reflection_order_\d_culled_beam",
-    "source_beam": r"diffraction_sources_order_\d_culled_beam",
-}
-
-
-def path_keys(p):
-    """(tx, rx, interactions, primitives, rounded vertices) of every path, sorted."""
-    keys = []
-    for i in range(len(p)):
-        n = int(p.depth[i])
-        keys.append((int(p.tx_index[i]), int(p.rx_index[i]), tuple(p.interactions[i, :n].tolist()),
-                     tuple(p.primitive[i, :n].tolist()), tuple(np.round(p.vertices[i, : n + 2].ravel(), 6).tolist())))
-    return sorted(keys)
+from .helpers import path_keys
 
 
 @pytest.mark.parametrize("name", sorted(CULLING_TESTS))
@@ -48,7 +31,7 @@ def test_switching_a_culling_test_off_keeps_every_path_and_rejects_nothing_by_it
     off = trace(scene, tx, rx, opts.with_(disable_culling=base | {name}))
     assert len(on) > 0
     assert path_keys(on) == path_keys(off)
-    culled = {k: v for k, v in on.stats.items() if re.fullmatch(COUNTER[name], k)}
+    culled = {k: v for k, v in on.stats.items() if re.fullmatch(CULLING_COUNTERS[name], k)}
     assert sum(culled.values()) > 0, f"{name} culled nothing here: the test would not show it is safe"
     assert all(v == 0 for k, v in off.stats.items() if k in culled)
 

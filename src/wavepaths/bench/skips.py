@@ -33,13 +33,6 @@ def _path_set(p) -> set:
     return {tuple(r) for r in keys.tolist()}
 
 
-COUNTERS = {  # the stats keys each switch's culling is counted under
-    "keller_cone": r"diffraction_\dr_\dr_source_pairs_culled_keller_cone",
-    "receiver_mirror_side": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_side",
-    "receiver_beam": r"diffraction_\dr_\dr_receiver_pairs_rejected_beam",
-    "reflection_beam": r"reflection_order_\d_culled_beam",
-    "source_beam": r"diffraction_sources_order_\d_culled_beam",
-}
 
 
 def run_skips(quick: bool = False, rounds: int = 3, progress=print) -> dict:
@@ -47,7 +40,7 @@ def run_skips(quick: bool = False, rounds: int = 3, progress=print) -> dict:
     from ..fields import FieldConfig, compute_fields
     from ..scene import load_scene
     from ..search import TraceOptions, trace
-    from ..search.options import CULLING_TESTS
+    from ..search.options import CULLING_COUNTERS, CULLING_TESTS
     from .scenes import street_canyon
 
     bench = street_canyon(30 if quick else 100)
@@ -75,7 +68,7 @@ def run_skips(quick: bool = False, rounds: int = 3, progress=print) -> dict:
     rows = []
     for label in settings:
         name = label[: -len(" off")] if label.endswith(" off") else None
-        culled = (sum(v for k, v in stats.items() if re.fullmatch(COUNTERS[name], k)) if name in COUNTERS else None)
+        culled = (sum(v for k, v in stats.items() if re.fullmatch(CULLING_COUNTERS[name], k)) if name in CULLING_COUNTERS else None)
         rows.append({"setting": label, "test": name, "description": CULLING_TESTS.get(name, ""),
                      "time_s": times[label].as_dict(), "saved_s": times[label].median_s - on,
                      "saved_fraction": (times[label].median_s - on) / times[label].median_s,

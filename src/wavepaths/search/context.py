@@ -69,6 +69,7 @@ class TxContext:
     stats: dict = field(default_factory=dict)
     beams: list = field(default_factory=list)
     apertures: Apertures | None = None
+    edges: object = None  # SphereTree over the diffracting dihedra's edges (beams.edge_tree), or None
 
 
 def _group(keys: np.ndarray):
@@ -119,6 +120,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
     sources: list[DiffractionSources] = []
     sectors = None
     stride = 1
+    edges = None
     if options.diffraction and len(diffracting):
         dihedra = scene.dihedra
         sectors = sector_table(dihedra)
@@ -145,4 +147,4 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             c, d, key = c[o], d[o], key[o]
             uk, start, count = _group(key)
             sources.append(DiffractionSources(c, d, key, uk, start, count))
-    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures)
+    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures, edges)

@@ -16,6 +16,15 @@ CULLING_TESTS: dict[str, str] = {
 }
 """The conservative culling tests that :attr:`TraceOptions.disable_culling` can switch off."""
 
+CULLING_COUNTERS: dict[str, str] = {
+    "keller_cone": r"diffraction_\dr_\dr_source_pairs_culled_keller_cone",
+    "receiver_mirror_side": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_side",
+    "receiver_beam": r"diffraction_\dr_\dr_receiver_pairs_rejected_beam",
+    "reflection_beam": r"reflection_order_\d_culled_beam",
+    "source_beam": r"diffraction_sources_order_\d_culled_beam",
+}
+"""The ``Paths.stats`` keys (regular expressions) under which each culling test counts what it drops."""
+
 
 @dataclass(frozen=True)
 class TraceOptions:

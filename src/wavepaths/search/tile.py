@@ -385,7 +385,7 @@ def diffraction_tile(
 ) -> list[PathBatch]:
     """Diffracted paths with ``a`` reflections before and ``b`` after the diffraction.
 
-    ``edges``: a :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
+    ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
     (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
     queries instead of the dense product.
 
@@ -516,11 +516,7 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
         rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers)
-        edges = None
-        if opts.diffraction_reflections >= 1 and ctx.apertures is not None:
-            from .beams import edge_tree
-
-            edges = edge_tree(scene, ctx.diffracting)
+        edges = ctx.edges if opts.diffraction_reflections >= 1 and ctx.apertures is not None else None
         for a in range(opts.diffraction_reflections + 1):
             for b in range(opts.diffraction_reflections + 1 - a):
                 batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges)
