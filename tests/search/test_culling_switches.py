@@ -39,3 +39,23 @@ def test_switching_a_culling_test_off_keeps_every_path_and_rejects_nothing_by_it
 def test_unknown_culling_test_is_an_error():
     with pytest.raises(WavepathsError, match="unknown culling"):
         TraceOptions(disable_culling={"no_such_test"})
+
+
+def test_receiver_side_by_edge_tree_finds_the_same_paths_as_the_dense_one(monkeypatch, rng):
+    """The two implementations of the receiver side (dense products, edge-tree queries) agree."""
+    import wavepaths.search.tile as tile
+
+    scene = load_scene("street_canyon")
+    # receivers in the street (|y| < 10) and behind the buildings (|y| > 25), outside them
+    street = rng.uniform(size=30) < 0.5
+    y = np.where(street, rng.uniform(-9, 9, 30), np.sign(rng.uniform(-1, 1, 30)) * rng.uniform(27, 39, 30))
+    rx = np.column_stack([rng.uniform(-95, 95, 30), y, np.full(30, 1.5)])
+    tx = np.array([[-60.0, 0.0, 10.0]])
+    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, rx_batch=8)
+    dense = trace(scene, tx, rx, opts)
+    monkeypatch.setattr(tile, "DENSE_RECEIVER_SIDE_MAX_DIHEDRA", 0)
+    tree = trace(scene, tx, rx, opts)
+    assert not any("rejected_mirror_side" in k for k in tree.stats)  # the tree path ran
+    assert any("rejected_mirror_side" in k for k in dense.stats)
+    assert len(dense) > 0
+    assert path_keys(dense) == path_keys(tree)

@@ -415,12 +415,15 @@ def chain_apertures(
 def chain_beams_meet(
     scene: "Scene", level: "ImageLevel", rows: np.ndarray, quads: np.ndarray, centre: np.ndarray,
     radius: np.ndarray | None = None, end: np.ndarray | None = None, slack: float | None = None,
+    owner: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(m,) bool: whether the last leg of chain ``rows[i]`` can reach a target (a sphere or a segment).
+    """(m,) bool: whether the last leg of chain ``rows[owner[i]]`` can reach target ``i`` (a sphere or a segment).
 
     The target is the sphere ``(centre[i], radius[i])``, or the segment ``centre[i] -> end[i]``
-    when ``end`` is given. Two necessary conditions for a point of the target to end the last
-    leg (see :func:`chain_apertures`):
+    when ``end`` is given. Without ``owner`` target ``i`` is tested against chain
+    ``rows[i]``; with it (several targets per chain), the per-chain work (the mirrored
+    apertures and the beams' side planes) is done once per chain. Two necessary conditions
+    for a point of the target to end the last leg (see :func:`chain_apertures`):
 
     * it lies beyond the last mirror ``q_k``, on the side opposite the last image (the
       back-tracing needs the segment from it to ``I_k`` to cross ``q_k``'s plane);
@@ -433,15 +436,17 @@ def chain_beams_meet(
     target that some valid leg reaches always passes.
     """
     k = level.order
-    m = len(rows)
+    owner = np.arange(len(rows)) if owner is None else np.asarray(owner, np.int64)
+    m = len(owner)
     if m == 0:
         return np.zeros(0, bool)
     eps = scene.length_tolerance(1e-9) if slack is None else slack
-    apex = level.images[rows, -1]
+    apex_c = level.images[rows, -1]  # per chain
     qk = level.polygons[rows, -1]
-    n = scene.polygon_normal[qk]
-    d = scene.polygon_offset[qk]
-    side = np.sign(np.einsum("ij,ij->i", apex, n) - d)  # the last image's side of q_k
+    n_c = scene.polygon_normal[qk]
+    d_c = scene.polygon_offset[qk]
+    side_c = np.sign(np.einsum("ij,ij->i", apex_c, n_c) - d_c)  # the last image's side of q_k
+    apex, n, d, side = apex_c[owner], n_c[owner], d_c[owner], side_c[owner]
     rad = np.zeros(m) if radius is None else radius
     far = 1e-9 * np.linalg.norm(centre - apex, axis=1) + eps
     if end is None:
@@ -452,18 +457,19 @@ def chain_beams_meet(
             side * (np.einsum("ij,ij->i", end, n) - d) < far
         )
     idx = np.nonzero(keep)[0]
-    _, _, qd = chain_apertures(scene, level, rows[idx], quads=quads)
+    used, inv = np.unique(owner[idx], return_inverse=True)  # chains still needed, once each
+    _, _, qd = chain_apertures(scene, level, rows[used], quads=quads)
     for j in range(k):
         if len(idx) == 0:
             break
-        planes = quad_side_planes(apex[idx], qd[:, j])
+        planes = quad_side_planes(apex_c[used], qd[:, j])[inv]
         a = np.einsum("ikj,ij->ik", planes, centre[idx] - apex[idx])
         if end is None:
             ok = (a >= -(rad[idx] + far[idx])[:, None]).all(axis=1)
         else:
             b = np.einsum("ikj,ij->ik", planes, end[idx] - apex[idx])
             ok = (np.maximum(a, b) >= -far[idx][:, None]).all(axis=1)
-        idx, qd = idx[ok], qd[ok]
+        idx, inv = idx[ok], inv[ok]
     out = np.zeros(m, bool)
     out[idx] = True
     return out
@@ -583,8 +589,14 @@ def beams_reaching(
             yield r[keep], c[keep]
 
 
-def point_clusters(points: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def point_clusters(
+    points: np.ndarray, size: int, max_radius: float = np.inf
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Groups of at most ``size`` nearby points (consecutive along a Morton curve).
+
+    A group whose bounding sphere is wider than ``max_radius`` [m] is halved (along the
+    curve) until it is not, or holds one point: a wide sphere culls poorly, and scattered
+    points are then better queried one by one.
 
     Returns
     -------
@@ -597,15 +609,27 @@ def point_clusters(points: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarra
     """
     n = len(points)
     members = morton_order(points)
-    start = np.append(np.arange(0, n, size, dtype=np.int64), n)
-    g = len(start) - 1
-    owner = np.arange(n) // size
     p = points[members]
-    centre = np.add.reduceat(p, start[:-1], axis=0) / np.diff(start)[:, None] if g else np.zeros((0, 3))
-    dist = np.linalg.norm(p - centre[owner], axis=1)
-    radius = np.maximum.reduceat(dist, start[:-1]) if g else np.zeros(0)
     scale = float(np.abs(points).max()) if n else 0.0
-    return members, start, centre, radius * (1 + 1e-9) + 1e-12 * scale
+
+    def spheres(st: np.ndarray):
+        if len(st) == 1:
+            return np.zeros((0, 3)), np.zeros(0)
+        owner = np.repeat(np.arange(len(st) - 1), np.diff(st))
+        centre = np.add.reduceat(p, st[:-1], axis=0) / np.diff(st)[:, None]
+        dist = np.linalg.norm(p - centre[owner], axis=1)
+        return centre, np.maximum.reduceat(dist, st[:-1]) * (1 + 1e-9) + 1e-12 * scale
+
+    start = np.append(np.arange(0, n, size, dtype=np.int64), n)
+    centre, radius = spheres(start)
+    while True:
+        split = (radius > max_radius) & (np.diff(start) > 1)
+        if not split.any():
+            break
+        mid = (start[:-1] + start[1:]) // 2
+        start = np.sort(np.concatenate([start, mid[split]]))
+        centre, radius = spheres(start)
+    return members, start, centre, radius
 
 
 RX_CLUSTER = 8  # receivers per cluster in the reflection beam culling
@@ -618,7 +642,8 @@ def reflection_candidates(
     """Blocks of (receiver, chain) candidates of reflection order ``order`` for receivers ``rx``.
 
     Without beams in the context, every pair (receivers x chains, in blocks of ``budget``).
-    With them: the receivers are grouped in clusters of ``RX_CLUSTER`` (Morton order); the
+    With them: the receivers are grouped in clusters of up to ``RX_CLUSTER`` (Morton order,
+    no wider than the 75th percentile of the mirrors' bounding radii); the
     chains whose last-leg beams can reach a cluster's sphere are found in the context's
     :class:`ChainBeams` tree (:func:`beams_reaching`); each of the cluster's receivers is
     then tested as a point (:func:`chain_beams_meet`). Both tests only drop pairs no leg
@@ -636,7 +661,8 @@ def reflection_candidates(
             r = np.arange(s, min(n, s + step))
             yield np.repeat(r, c), np.tile(np.arange(c), len(r))
         return
-    members, start, centre, radius = point_clusters(rx, RX_CLUSTER)
+    # scattered receivers are queried one by one: a cluster may be as wide as a typical mirror
+    members, start, centre, radius = point_clusters(rx, RX_CLUSTER, float(np.percentile(ctx.apertures.radius, 75)))
     size = np.diff(start)
     kept = 0
     buf_r: list[np.ndarray] = []
@@ -645,8 +671,10 @@ def reflection_candidates(
     for cl, ch in beams_reaching(scene, lv, beams, ctx.apertures, centre, radius, max(1, budget // 32)):
         cnt = size[cl]
         ri = members[np.repeat(start[cl], cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
-        ci = np.repeat(ch, cnt)
-        ok = chain_beams_meet(scene, lv, ci, ctx.apertures.quads, rx[ri]) if POINT_TEST else np.ones(len(ri), bool)
+        owner = np.repeat(np.arange(len(ch)), cnt)
+        ci = ch[owner]
+        ok = chain_beams_meet(scene, lv, ch, ctx.apertures.quads, rx[ri], owner=owner) if POINT_TEST \
+            else np.ones(len(ri), bool)
         buf_r.append(ri[ok])
         buf_c.append(ci[ok])
         held += int(ok.sum())

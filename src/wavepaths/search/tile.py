@@ -26,6 +26,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
 
 CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~100 MB)
+# the receiver side of order >= 1 is dense (matrix products over images x dihedra) up to this
+# many dihedra, tree queries above: dense was 2.6x faster with 640 (etoile_crop, R3+D2) and
+# 1.5x with ~100 (simple_street_canyon map, R2+D1); the tree's cost grows as log(dihedra)
+DENSE_RECEIVER_SIDE_MAX_DIHEDRA = 4096
 
 
 def _leg_order(legs: int) -> list[int]:
@@ -249,13 +253,41 @@ class _EndSide:
     rho: np.ndarray
 
 
+def _keller_window(scene: "Scene", tside: _EndSide) -> tuple[np.ndarray, np.ndarray]:
+    """Per dihedron, the window of receiver coordinates some transmitter-side source can reach on the edge.
+
+    The closed-form point ``t = (t_e d_r + t_r d_e) / (d_e + d_r)`` (seed §2.3) lies on the
+    edge ``0 <= t <= L`` iff ``t_r >= (-t_e / d_e) d_r`` and ``t_r - L <= ((L - t_e) / d_e) d_r``.
+    Returns ``lo``, ``hi`` (n_dihedra,): the smallest ``-t_e / d_e`` and the largest
+    ``(L - t_e) / d_e`` over the sources of each dihedron (``+inf``, ``-inf`` without one),
+    so a receiver-side pair that fails ``t_r >= lo d_r`` or ``t_r - L <= hi d_r`` has no
+    source whose point lies on the edge (:func:`_in_keller_window`). The two bounds may come
+    from different sources: conservative.
+    """
+    n = len(scene.dihedra.length)
+    lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.minimum.at(lo, tside.dihedron, -tside.t / tside.rho)
+        np.maximum.at(hi, tside.dihedron, (scene.dihedra.length[tside.dihedron] - tside.t) / tside.rho)
+    return lo, hi
+
+
+def _in_keller_window(scene: "Scene", window, d: np.ndarray, t: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """(k,) bool: the receiver-side pairs (dihedron ``d``, coordinates ``t``, ``rho``) inside ``window``
+    (:func:`_keller_window`), with a margin of ``1e-9`` of the scene size."""
+    lo, hi = window
+    tol = scene.length_tolerance(1e-9)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return (t - lo[d] * rho >= -tol) & (t - scene.dihedra.length[d] - hi[d] * rho <= tol)
+
+
 def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray):
     """:func:`~wavepaths.topology.sectors.sector_lookup` on the context's sector table."""
     return sector_lookup(ctx.sectors, d, x, y)
 
 
 def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
-                           edges, stats: Counter, tag: str) -> _EndSide:
+                           edges, stats: Counter, tag: str, window=None) -> _EndSide:
     """Step 1 of :func:`diffraction_tile` for receiver images of order ``b >= 1``, through the edge tree.
 
     Seen from the receiver, the legs after the diffraction are a reflected chain from the
@@ -278,6 +310,10 @@ def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_
     d = np.concatenate(dd) if dd else np.zeros(0, np.int64)
     stats[f"{tag}_receiver_pairs_rejected_beam"] += len(e_rows) * len(diffr) - len(e)
     x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
+    if window is not None:
+        inside = _in_keller_window(scene, window, d, t, np.hypot(x, y))
+        stats[f"{tag}_receiver_pairs_rejected_keller_window"] += int((~inside).sum())
+        e, d, x, y, t = e[inside], d[inside], x[inside], y[inside], t[inside]
     sec, width, phi = _sector_in_table(ctx, d, x, y)
     good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
     stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~good).sum())
@@ -285,12 +321,13 @@ def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_
 
 
 def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
-                   stats: Counter, tag: str) -> _EndSide:
+                   stats: Counter, tag: str, window=None) -> _EndSide:
     """Step 1 of :func:`diffraction_tile`, dense over (receiver images ``e_rows``) x (dihedra ``diffr``).
 
-    Every quantity is an outer product of a per-image and a per-edge vector (matrix
+    The culling tests are outer products of a per-image and a per-edge vector (matrix
     products on coordinates recentred on the scene centre, so that float64 keeps the
-    scene's resolution at any offset), so nothing is gathered per pair. Tests:
+    scene's resolution at any offset), so nothing is gathered per pair for them; the
+    sector is then computed per surviving pair, from ``R - A``. Tests:
 
     * for ``b >= 1``, *mirror side*: the edge must have a point on the real side of the
       image's last mirror ``q`` (the leg from the diffraction point to the last image
@@ -300,9 +337,11 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
       image toward the diffraction point, so the directions from the image to ``q``'s
       bounding sphere and to the edge's bounding sphere must overlap (the bounding-sphere
       beam of :mod:`wavepaths.search.images`; conservative);
+    * *Keller window* (with ``window``, :func:`_keller_window`): some source's
+      diffraction point lies on the edge;
     * the sector: not on a face, and wider than pi.
     """
-    dihedra, tab = scene.dihedra, ctx.sectors
+    dihedra = scene.dihedra
     c0 = scene.center
     I = rx_lv.last[e_rows] - c0  # (E, 3)
     A = dihedra.origin[diffr] - c0  # (D, 3)
@@ -327,29 +366,34 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
         dist_q = np.linalg.norm(to_q, axis=1)
         M = A + 0.5 * L[:, None] * w  # edge midpoints (D, 3)
         h = 0.5 * L
-        im = I @ M.T  # (E, D)
-        dist_m = np.sqrt(np.maximum((I * I).sum(1)[:, None] - 2 * im + (M * M).sum(1)[None, :], 0.0))
+        dist_m = np.sqrt(np.maximum((I * I).sum(1)[:, None] - 2 * (I @ M.T) + (M * M).sum(1)[None, :], 0.0))
         cos = (to_q @ M.T - (to_q * I).sum(1)[:, None]) / np.maximum(dist_q[:, None] * dist_m, 1e-300)
-        half_q = np.arcsin(np.clip(radius[q] / np.maximum(dist_q, 1e-300), 0, 1))
-        half_m = np.arcsin(np.clip(h[None, :] / np.maximum(dist_m, 1e-300), 0, 1))
-        beam = (np.arccos(np.clip(cos, -1, 1)) <= half_q[:, None] + half_m + 1e-9)
+        # angle(to q, to M) <= half_q + half_m, in the cosine domain (no arccos per pair):
+        # cos(half_q + half_m) = cos_q cos_m - sin_q sin_m, with sin = radius / distance
+        sin_q = np.clip(radius[q] / np.maximum(dist_q, 1e-300), 0, 1)[:, None]
+        sin_m = np.clip(h[None, :] / np.maximum(dist_m, 1e-300), 0, 1)
+        cos_q, cos_m = np.sqrt(1 - sin_q * sin_q), np.sqrt(1 - sin_m * sin_m)
+        # both half-angles lie in [0, pi/2], their sum in [0, pi] where cos decreases; the margin
+        # is 1e-9 rad (cos(s + 1e-9) ~ cos s - 1e-9 sin s) plus 1e-12 for rounding
+        cos_sum = cos_q * cos_m - sin_q * sin_m
+        sin_sum = sin_q * cos_m + cos_q * sin_m
+        beam = cos >= cos_sum - 1e-9 * sin_sum - 1e-12
         beam |= (dist_q <= radius[q])[:, None] | (dist_m <= h[None, :])
         stats[f"{tag}_receiver_pairs_rejected_beam"] += int((ok & ~beam).sum())
         ok &= beam
-    xh, yh = tab.x_hat[diffr], tab.y_hat[diffr]
-    x = I @ xh.T - (A * xh).sum(1)[None, :]
-    y = I @ yh.T - (A * yh).sum(1)[None, :]
-    sec, width, phi = _sector_in_table(ctx, diffr, x, y)
-    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((ok & ~good).sum())
-    ok &= good
+    # the sector, per surviving pair, from R - A (the dense products above lose digits
+    # relative to a small distance to the edge line: an end point almost on it)
     ie, idd = np.nonzero(ok)
-    e, d, sec = e_rows[ie], diffr[idd], sec[ie, idd]
-    # the kept pairs' coordinates again, from R - A per pair: the dense products above lose
-    # digits relative to a small distance to the edge line (an end point almost on it)
+    e, d = e_rows[ie], diffr[idd]
     x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
-    phi = np.arctan2(y, x) - ctx.sectors.angles[d, sec]
-    phi = np.mod(phi, 2 * np.pi)
+    if window is not None:
+        inside = _in_keller_window(scene, window, d, t, np.hypot(x, y))
+        stats[f"{tag}_receiver_pairs_rejected_keller_window"] += int((~inside).sum())
+        e, d, x, y, t = e[inside], d[inside], x[inside], y[inside], t[inside]
+    sec, width, phi = _sector_in_table(ctx, d, x, y)
+    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~good).sum())
+    e, d, sec, phi, t, x, y = e[good], d[good], sec[good], phi[good], t[good], x[good], y[good]
     return _EndSide(e, d, sec, phi, t, np.hypot(x, y))
 
 
@@ -387,7 +431,8 @@ def diffraction_tile(
 
     ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
     (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
-    queries instead of the dense product.
+    queries instead of the dense product when there are more than
+    ``DENSE_RECEIVER_SIDE_MAX_DIHEDRA`` candidate dihedra.
 
     Also marks in ``grazing`` (m, n) the (tx, rx) pairs for which a candidate lies within
     the float32 uncertainty of a shadow or reflection boundary of its edge: the geometrical
@@ -431,11 +476,13 @@ def diffraction_tile(
         if len(diffr) == 0:
             continue
         stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
-        if b >= 1 and edges is not None and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling:
-            rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag)
-        else:
-            rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag)
         tside = _transmitter_side(scene, ctx, tx_lv, src)
+        window = None if "keller_window" in ctx.options.disable_culling else _keller_window(scene, tside)
+        if (b >= 1 and edges is not None and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA
+                and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling):
+            rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag, window)
+        else:
+            rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
         for rows, src_rows in _join_chunks(src, rside.dihedron * ctx.key_stride + rside.sector):
             out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
                                            rside, rows, tside, src_rows)
