@@ -250,7 +250,36 @@ def test_bad_coverage_calls_are_clear_errors(box):
         coverage(box, [0, 0, 20], huge, settings=IN_PROCESS)
     with pytest.raises(WavepathsError, match="`grid` must be a PlanarGrid or MeshGrid"):
         coverage(box, [0, 0, 20], np.zeros((4, 3)), settings=IN_PROCESS)
-    with pytest.raises(WavepathsError, match="`tile_size` must be a positive integer"):
+    with pytest.raises(WavepathsError, match="`tile_size` must be None or a positive integer"):
         CoverageOptions(tile_size=0)
     with pytest.raises(WavepathsError, match="`quantity` must be one of"):
         coverage(box, [0, 0, 20], PlanarGrid([20, 20], 2, 2, height=1), settings=IN_PROCESS).quantity("gain")
+
+
+def test_automatic_tile_size_bounds_the_receiver_images_a_tile_holds(canyon, monkeypatch):
+    import importlib
+
+    from wavepaths.search.context import build_tx_context
+
+    solver = importlib.import_module("wavepaths.coverage.solver")  # `wavepaths.coverage` is also a function
+
+    tx = np.array([[-60.0, 0.0, 10.0]])
+    ctx = build_tx_context(canyon, tx, TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=2))
+    per_rx = 1 + ctx.stats["images_order_1"] + ctx.stats["images_order_2"]
+    assert per_rx > 1
+    assert solver.auto_tile_size(ctx, 100_000, workers=1) == min(1024, solver.TILE_IMAGE_BUDGET // per_rx)
+    monkeypatch.setattr(solver, "TILE_IMAGE_BUDGET", 40 * per_rx)
+    assert solver.auto_tile_size(ctx, 100_000, workers=1) == 40  # budget / images per receiver
+    monkeypatch.setattr(solver, "TILE_IMAGE_BUDGET", 1)
+    assert solver.auto_tile_size(ctx, 100_000, workers=1) == 16  # never below 16
+    monkeypatch.undo()
+    # without diffraction a receiver holds no image tree: the largest tiles, but two per worker
+    ctx0 = build_tx_context(canyon, tx, TraceOptions(max_reflections=2, diffraction=False))
+    assert solver.auto_tile_size(ctx0, 100_000, workers=1) == 1024
+    assert solver.auto_tile_size(ctx0, 1000, workers=2) == 250
+    # the automatic size is reported, and the map equals one with explicit tiles
+    grid = canyon_grid()
+    auto = coverage(canyon, tx, grid, TraceOptions(max_reflections=1), settings=CoverageOptions(workers=1))
+    fixed = coverage(canyon, tx, grid, TraceOptions(max_reflections=1), settings=IN_PROCESS)
+    assert auto.timings["tile_size"] == 1024
+    np.testing.assert_allclose(auto.path_gain(), fixed.path_gain(), rtol=RTOL)

@@ -52,12 +52,14 @@ WAVEPATHS_SETTINGS = [
     ("R1", 1, False, 0),
     ("R2", 2, False, 0),
     ("R3", 3, False, 0),
+    ("R0+D", 0, True, 0),
     ("R1+D", 1, True, 0),
     ("R2+D", 2, True, 0),
     ("R2+D1", 2, True, 1),
     ("R3+D1", 3, True, 1),
     ("R3+D2", 3, True, 2),
 ]
+QUICK_SETTINGS = ("R1", "R2", "R0+D", "R1+D", "R2+D", "R3+D1")
 
 
 def map_error(value_db: np.ndarray, reference_db: np.ndarray, valid: np.ndarray) -> dict:
@@ -130,7 +132,7 @@ def run_map_tradeoff(quick: bool = False, workers: int = 1, progress=print) -> d
     cell = 8.0 if quick else 4.0
     spec = {"center": np.array([0.0, 0.0, 1.5]), "size": np.array([176.0, 120.0]), "cell_size": cell}
     ref_sub = 2 if quick else 3
-    settings = WAVEPATHS_SETTINGS if not quick else [WAVEPATHS_SETTINGS[i] for i in (0, 1, 3, 4, 6)]
+    settings = WAVEPATHS_SETTINGS if not quick else [x for x in WAVEPATHS_SETTINGS if x[0] in QUICK_SETTINGS]
     progress(f"benchmark 3 (maps): wavepaths reference, {ref_sub}x{ref_sub} sub-cells of {cell:g} m cells")
     centre_map, _ = wavepaths_map(scene, spec, settings[0], 1, workers)  # warm-up
     ref_lin, ref_time = wavepaths_map(scene, spec, WAVEPATHS_SETTINGS[-1], ref_sub, workers)

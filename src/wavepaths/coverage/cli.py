@@ -39,7 +39,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     par = p.add_mutually_exclusive_group()
     par.add_argument("--workers", type=int, help="local processes (default: one per core)")
     par.add_argument("--dask", metavar="ADDRESS", help="run the tiles on the Dask scheduler at ADDRESS")
-    p.add_argument("--tile-size", type=int, default=256, help="cells traced together (default 256)")
+    p.add_argument("--tile-size", type=int, default=None,
+                   help="cells traced together (default: from the scene's image counts, 16 to 1024)")
     p.add_argument("--incoherent", action="store_true", help="add path powers instead of complex amplitudes")
     p.add_argument("--keep-inside", action="store_true",
                    help="trace cells inside solid objects too (rooms covered from inside)")
