@@ -64,6 +64,11 @@ def test_chain_beams_keep_every_pair_that_back_traces(seed):
         ci = np.tile(np.arange(len(lv)), len(rx))
         keep = chain_beams_meet(scene, lv, ci, ctx.apertures.quads, rx[ri])
         assert valid <= set(zip(ri[keep].tolist(), ci[keep].tolist()))
+        # the same test with each chain's planes computed once for all its targets
+        owner = np.repeat(np.arange(len(lv)), len(rx))
+        shared = chain_beams_meet(scene, lv, np.arange(len(lv)), ctx.apertures.quads,
+                                  rx[np.tile(np.arange(len(rx)), len(lv))], owner=owner)
+        np.testing.assert_array_equal(shared.reshape(len(lv), len(rx)).T, keep.reshape(len(rx), len(lv)))
         # the tree query with clusters, then points
         stats = Counter()
         got = set()
@@ -118,3 +123,20 @@ def test_tiny_clusters_and_blocks(monkeypatch):
         got |= set(zip(r.tolist(), c.tolist()))
     valid, _ = all_pairs_valid(scene, ctx.levels[2], rx)
     assert valid <= got
+
+
+def test_point_clusters_cover_every_point_once_and_respect_the_radius_limit():
+    rng = np.random.default_rng(11)
+    # a dense patch (clusters of 8 fit under the limit) and scattered points (they do not)
+    pts = np.concatenate([rng.uniform(0, 3, (64, 3)), rng.uniform(-500, 500, (40, 3))])
+    members, start, centre, radius = beams_mod.point_clusters(pts, 8, max_radius=5.0)
+    assert sorted(members.tolist()) == list(range(len(pts)))
+    sizes = np.diff(start)
+    assert sizes.max() <= 8 and sizes.min() >= 1
+    for i in range(len(sizes)):
+        p = pts[members[start[i]:start[i + 1]]]
+        assert np.all(np.linalg.norm(p - centre[i], axis=1) <= radius[i])
+        assert radius[i] <= 5.0 or sizes[i] == 1
+    assert (sizes == 8).sum() >= 6  # the dense patch stays in full clusters
+    unlimited = beams_mod.point_clusters(pts, 8)
+    assert np.all(np.diff(unlimited[1])[:-1] == 8)
