@@ -18,6 +18,12 @@ from ..search.paths import InteractionType, Paths
 SPEED_OF_LIGHT = 299_792_458.0
 
 
+DUPLICATE_TOL_M = 1e-2
+SIONNA_DUPLICATE = ("duplicate: Sionna gives this path twice (the edge or face is shared by two objects and it "
+                    "interacts with each object's own copy); its twin is matched. wavepaths has one dihedron with all "
+                    "the faces (seed §3.2)")
+
+
 @dataclass
 class Match:
     """One matched pair of paths and their differences."""
@@ -139,12 +145,16 @@ def compare_paths(
                 comp.only_wavepaths.append({"tx": t, "rx": r, "kinds": k, "index": i, "length_m": float(wp_len[i]),
                                             "gain_db": float(20 * np.log10(max(abs(wp_a[i]), 1e-300))),
                                             "reason": explain("wavepaths", i) if explain else ""})
+        twins = [j2 for j2 in sj if j2 in used_s]
         for j in sj:
             if j not in used_s:
+                n = int(sn.num_interactions[j])
+                dup = any(np.abs(sn.vertices[j2, : n + 2] - sn.vertices[j, : n + 2]).max() < DUPLICATE_TOL_M
+                          and (sn.objects[j2, :n] != sn.objects[j, :n]).any() for j2 in twins)
                 comp.only_sionna.append({"tx": t, "rx": r, "kinds": k, "index": j,
                                          "length_m": float(sn.tau[j] * SPEED_OF_LIGHT),
                                          "gain_db": float(20 * np.log10(max(abs(sn.a[j]), 1e-300))),
-                                         "reason": explain("sionna", j) if explain else ""})
+                                         "reason": SIONNA_DUPLICATE if dup else (explain("sionna", j) if explain else "")})
     return comp
 
 

@@ -74,6 +74,9 @@ def _explainer(scene, paths, sn, case: Case):
 
 SIONNA_ONLY_TOPOLOGY = "topology rule: Sionna ignores another object's face on this edge; the path leaves its topological volume (seed §3.1, figure 4)"
 SIONNA_ONLY_FAILURE = "found by Sionna only: not found by wavepaths (a failure)"
+SIONNA_ONLY_NOT_A_WEDGE = ("not a wedge: Sionna diffracts on an edge whose free-space angle around E and R is at most "
+                           "pi (flat or concave, n <= 1: no shadow boundary, UTD's D vanishes at n = 1 and is not "
+                           "defined below); wavepaths diffracts only into sectors wider than pi (seed §3.2)")
 
 
 def _multi_object_dihedra(scene) -> set:
@@ -105,12 +108,23 @@ def _explain_sionna_only(scene, sn, j: int) -> str:
     rel = p - dih.origin
     t = np.einsum("ij,ij->i", rel, dih.direction)
     dist = np.linalg.norm(rel - t[:, None] * dih.direction, axis=1)
-    on = np.nonzero((dist < 1e-3) & (t > -1e-3) & (t < dih.length + 1e-3))[0]
+    # Sionna's vertices are float32: within 1 cm of an edge (the path matching's tolerance is 2 cm)
+    tol = 1e-2
+    on = np.nonzero((dist < tol) & (t > -tol) & (t < dih.length + tol))[0]
     for d in on:
         if dih.face_count[d] >= 3:
             res = find_dihedron(dih, np.array([d]), p[None], e[None], r[None])
             if not res.valid[0]:
                 return SIONNA_ONLY_TOPOLOGY
+    if len(on) and not dih.diffracting[on].any():
+        from ..topology.sectors import sector_of, sector_table
+
+        tab = sector_table(dih)
+        dd = np.concatenate([on, on])
+        sec, width = sector_of(tab, dd, np.concatenate([np.repeat(e[None], len(on), 0), np.repeat(r[None], len(on), 0)]),
+                               dih.origin[dd])
+        if np.all(width <= np.pi + scene.tolerances.coplanar_angle):
+            return SIONNA_ONLY_NOT_A_WEDGE
     return SIONNA_ONLY_FAILURE
 
 

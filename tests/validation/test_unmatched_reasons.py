@@ -1,0 +1,61 @@
+"""Why a Sionna path has no wavepaths match: each reason is given only where it holds.
+
+Sionna RT paths are made up here (no Sionna run): the reasons depend on the geometry alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wavepaths import TraceOptions, load_scene, trace
+from wavepaths.fields import FieldConfig, compute_fields
+from wavepaths.search.geometry import diffraction_point_parameter
+from wavepaths.validation.compare import SIONNA_DUPLICATE, compare_paths
+from wavepaths.validation.report import SIONNA_ONLY_FAILURE, SIONNA_ONLY_NOT_A_WEDGE, _explain_sionna_only
+from wavepaths.validation.sionna_runner import SionnaPaths
+
+
+def _sionna_paths(rows: list[tuple[np.ndarray, list[int], list[int]]], depth: int = 1) -> SionnaPaths:
+    """Fake Sionna paths: (vertices (k + 2, 3), interaction kinds, object ids) per row, one tx and one rx."""
+    n = len(rows)
+    verts = np.full((n, depth + 2, 3), np.nan)
+    inter = np.zeros((n, depth), np.int8)
+    objs = np.full((n, depth), -1, np.int64)
+    for i, (v, kinds, ob) in enumerate(rows):
+        verts[i, : len(v)] = v
+        inter[i, : len(kinds)] = kinds
+        objs[i, : len(ob)] = ob
+    length = np.array([np.linalg.norm(np.diff(v, axis=0), axis=1).sum() for v, _, _ in rows])
+    return SionnaPaths(np.zeros(n, np.int64), np.zeros(n, np.int64), inter, np.array([len(k) for _, k, _ in rows]),
+                       verts, np.full(n, 1e-6 + 0j), length / 299_792_458.0, objs, np.zeros((n, depth), np.int64),
+                       ("box", "other_box", "ground"), 3.5e9, depth, 0, 0.0, 0.0, "fake")
+
+
+def test_unmatched_sionna_paths_get_the_reason_that_holds():
+    scene = load_scene("box_on_ground")  # a 10 m box on a 60 m ground; its foot is a concave edge
+    tx, rx = np.array([0.0, -20.0, 10.0]), np.array([3.0, -15.0, 2.0])  # both in front of the face y = -5
+    wp = trace(scene, tx[None], rx[None], TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0))
+    a = compute_fields(scene, wp, FieldConfig(3.5e9)).a
+    d = int(np.nonzero((wp.interactions[:, 0] == 2) & (wp.depth == 1))[0][0])
+    real = wp.vertices[d, :3]  # a diffracted path wavepaths finds (over a roof edge)
+    # the foot of the face y = -5: from (-5, -5, 0) along x, free-space angle pi/2 around tx and rx
+    t = float(diffraction_point_parameter(tx, rx, np.array([-5.0, -5.0, 0.0]), np.array([1.0, 0.0, 0.0])))
+    foot = np.array([-5.0 + t, -5.0, 0.0])
+    rows = [
+        (real, [2], [0]),                                  # matched
+        (real, [2], [1]),                                  # the same path on another object's copy of the edge
+        (np.stack([tx, foot, rx]), [2], [0]),              # diffraction at the concave foot
+        (np.stack([tx, np.array([0.0, -5.0, 7.0]), rx]), [2], [0]),  # a point on no edge
+    ]
+    sn = _sionna_paths(rows)
+    comp = compare_paths(wp, a, sn, explain=lambda side, i: _explain_sionna_only(scene, sn, i) if side == "sionna" else "")
+    reasons = {x["index"]: x["reason"] for x in comp.only_sionna}
+    assert 0 not in reasons
+    assert reasons[1] == SIONNA_DUPLICATE
+    assert reasons[2] == SIONNA_ONLY_NOT_A_WEDGE
+    assert reasons[3] == SIONNA_ONLY_FAILURE
+    # without its matched twin, a duplicate is not excused: both copies are explained on their own
+    sn2 = _sionna_paths(rows[1:2] + rows[1:2])
+    none = wp.select(np.zeros(len(wp), bool))
+    comp2 = compare_paths(none, a[:0], sn2, explain=lambda side, i: _explain_sionna_only(scene, sn2, i))
+    assert [x["reason"] for x in comp2.only_sionna] == [SIONNA_ONLY_FAILURE, SIONNA_ONLY_FAILURE]
