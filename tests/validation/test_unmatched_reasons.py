@@ -59,3 +59,23 @@ def test_unmatched_sionna_paths_get_the_reason_that_holds():
     none = wp.select(np.zeros(len(wp), bool))
     comp2 = compare_paths(none, a[:0], sn2, explain=lambda side, i: _explain_sionna_only(scene, sn2, i))
     assert [x["reason"] for x in comp2.only_sionna] == [SIONNA_ONLY_FAILURE, SIONNA_ONLY_FAILURE]
+
+
+def test_matching_maximises_the_pairs_within_the_tolerance():
+    """Three copies of one path per engine, shifted along x: only 0.073 m and 0.082 m lie within
+    2 cm of each other. An assignment on raw distances pairs them all beyond 2 cm (0 matches);
+    the matcher must find the one match."""
+    import dataclasses
+
+    scene = load_scene("box_on_ground")
+    tx, rx = np.array([0.0, -20.0, 10.0]), np.array([3.0, -15.0, 2.0])
+    wp = trace(scene, tx[None], rx[None], TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0))
+    d = int(np.nonzero((wp.interactions[:, 0] == 2) & (wp.depth == 1))[0][0])
+    three = wp.select(np.array([d, d, d]))
+    shift = np.array([1.0, 0.0, 0.0])
+    u, v = np.array([0.061, 0.073, 0.054]), np.array([0.094, 0.082, 0.0])
+    three = dataclasses.replace(three, vertices=three.vertices + u[:, None, None] * shift)
+    sn = _sionna_paths([(wp.vertices[d, :3] + x * shift, [2], [0]) for x in v])
+    comp = compare_paths(three, np.full(3, 1e-6 + 0j), sn)
+    assert [(m.wp_index, m.sn_index) for m in comp.matches] == [(1, 1)]
+    assert abs(comp.matches[0].vertex_error_m - 0.009) < 1e-9

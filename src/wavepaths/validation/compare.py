@@ -123,7 +123,11 @@ def compare_paths(
             vw = wp_paths.vertices[wi][:, : depth + 2]
             vs = sn.vertices[sj][:, : depth + 2]
             cost = np.linalg.norm(vw[:, None] - vs[None], axis=3).max(axis=2)
-            rows, cols = linear_sum_assignment(cost)
+            # every pair beyond the tolerance costs the same large amount, so the assignment
+            # first maximises the number of matches, then minimises their distances (on raw
+            # distances it could split an exact pair to shorten two far ones)
+            capped = np.where(cost <= vertex_tol, cost, 1e6 * max(vertex_tol, 1.0))
+            rows, cols = linear_sum_assignment(capped)
             for a, b in zip(rows, cols):
                 if cost[a, b] > vertex_tol:
                     continue

@@ -116,6 +116,10 @@ def _explain_sionna_only(scene, sn, j: int) -> str:
             res = find_dihedron(dih, np.array([d]), p[None], e[None], r[None])
             if not res.valid[0]:
                 return SIONNA_ONLY_TOPOLOGY
+    # the edges on which the point obeys Keller's law (float32 vertices: 2e-3 in the cosines);
+    # a point at a corner lies on other edges too, where it does not
+    u_in, u_out = (p - e) / np.linalg.norm(p - e), (r - p) / np.linalg.norm(r - p)
+    on = on[np.abs(dih.direction[on] @ u_in - dih.direction[on] @ u_out) < 2e-3]
     if len(on) and not dih.diffracting[on].any():
         from ..topology.sectors import sector_of, sector_table
 
