@@ -15,20 +15,22 @@ from wavepaths.search.options import CULLING_COUNTERS, CULLING_TESTS
 from .helpers import path_keys
 
 
+def _street_receivers(rng, n: int) -> np.ndarray:
+    """(n, 3) receivers at 1.5 m in the built-in street canyon: in the street (|y| < 10) or
+    behind the buildings (|y| > 25), never inside them."""
+    street = rng.uniform(size=n) < 0.5
+    y = np.where(street, rng.uniform(-9, 9, n), np.sign(rng.uniform(-1, 1, n)) * rng.uniform(27, 39, n))
+    return np.column_stack([rng.uniform(-95, 95, n), y, np.full(n, 1.5)])
+
+
 @pytest.mark.parametrize("name", sorted(CULLING_TESTS))
 def test_switching_a_culling_test_off_keeps_every_path_and_rejects_nothing_by_it(name, rng):
     scene = load_scene("street_canyon")
-    # receivers in the street (|y| < 10) and behind the buildings (|y| > 25), tx above the street
-    street = rng.uniform(size=40) < 0.5
-    y = np.where(street, rng.uniform(-9, 9, 40), np.sign(rng.uniform(-1, 1, 40)) * rng.uniform(27, 39, 40))
-    rx = np.column_stack([rng.uniform(-95, 95, 40), y, np.full(40, 1.5)])
+    rx = _street_receivers(rng, 40)
     tx = np.array([[-60.0, 0.0, 10.0]])
     opts = TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=2, rx_batch=2)
-    # with the edge tree, the receiver side's mirror-side and beam tests run as one query
-    # (counted as beam); the mirror-side test alone runs in the dense path, with the beam off
-    base = {"receiver_beam"} if name == "receiver_mirror_side" else set()
-    on = trace(scene, tx, rx, opts.with_(disable_culling=base))
-    off = trace(scene, tx, rx, opts.with_(disable_culling=base | {name}))
+    on = trace(scene, tx, rx, opts)
+    off = trace(scene, tx, rx, opts.with_(disable_culling={name}))
     assert len(on) > 0
     assert path_keys(on) == path_keys(off)
     culled = {k: v for k, v in on.stats.items() if re.fullmatch(CULLING_COUNTERS[name], k)}
@@ -46,10 +48,7 @@ def test_receiver_side_by_edge_tree_finds_the_same_paths_as_the_dense_one(monkey
     import wavepaths.search.tile as tile
 
     scene = load_scene("street_canyon")
-    # receivers in the street (|y| < 10) and behind the buildings (|y| > 25), outside them
-    street = rng.uniform(size=30) < 0.5
-    y = np.where(street, rng.uniform(-9, 9, 30), np.sign(rng.uniform(-1, 1, 30)) * rng.uniform(27, 39, 30))
-    rx = np.column_stack([rng.uniform(-95, 95, 30), y, np.full(30, 1.5)])
+    rx = _street_receivers(rng, 30)
     tx = np.array([[-60.0, 0.0, 10.0]])
     opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, rx_batch=8)
     dense = trace(scene, tx, rx, opts)

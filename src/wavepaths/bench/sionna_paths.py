@@ -135,8 +135,11 @@ def _agreement(xml: str, paths, a, sn) -> dict:
     from ..validation.compare import compare_paths
     from ..validation.report import SIONNA_ONLY_FAILURE, _explain_sionna_only
 
+    from ..topology.sectors import sector_table
+
     scene = load_scene(xml)
-    comp = compare_paths(paths, a, sn, explain=lambda side, i: _explain_sionna_only(scene, sn, i)
+    sectors = sector_table(scene.dihedra)
+    comp = compare_paths(paths, a, sn, explain=lambda side, i: _explain_sionna_only(scene, sn, i, sectors)
                          if side == "sionna" else "")
     s = comp.summary()
     failures = sum(1 for x in comp.only_sionna if x["reason"] == SIONNA_ONLY_FAILURE)

@@ -286,6 +286,23 @@ def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray
     return sector_lookup(ctx.sectors, d, x, y)
 
 
+def _kept_pairs_end_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e: np.ndarray, d: np.ndarray, window,
+                         stats: Counter, tag: str) -> _EndSide:
+    """The last tests of the receiver side on the (receiver image ``e``, dihedron ``d``) pairs that
+    passed the culling: the Keller window (with ``window``), then the sector (not on a face,
+    wider than pi), each per pair from ``R - A`` in the edge's frame."""
+    x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
+    rho = np.hypot(x, y)
+    if window is not None:
+        inside = _in_keller_window(scene, window, d, t, rho)
+        stats[f"{tag}_receiver_pairs_rejected_keller_window"] += int((~inside).sum())
+        e, d, x, y, t, rho = e[inside], d[inside], x[inside], y[inside], t[inside], rho[inside]
+    sec, width, phi = _sector_in_table(ctx, d, x, y)
+    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~good).sum())
+    return _EndSide(e[good], d[good], sec[good], phi[good], t[good], rho[good])
+
+
 def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
                            edges, stats: Counter, tag: str, window=None) -> _EndSide:
     """Step 1 of :func:`diffraction_tile` for receiver images of order ``b >= 1``, through the edge tree.
@@ -309,15 +326,7 @@ def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_
     e = e_rows[np.concatenate(ch)] if ch else np.zeros(0, np.int64)
     d = np.concatenate(dd) if dd else np.zeros(0, np.int64)
     stats[f"{tag}_receiver_pairs_rejected_beam"] += len(e_rows) * len(diffr) - len(e)
-    x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
-    if window is not None:
-        inside = _in_keller_window(scene, window, d, t, np.hypot(x, y))
-        stats[f"{tag}_receiver_pairs_rejected_keller_window"] += int((~inside).sum())
-        e, d, x, y, t = e[inside], d[inside], x[inside], y[inside], t[inside]
-    sec, width, phi = _sector_in_table(ctx, d, x, y)
-    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~good).sum())
-    return _EndSide(e[good], d[good], sec[good], phi[good], t[good], np.hypot(x[good], y[good]))
+    return _kept_pairs_end_side(scene, ctx, rx_lv, e, d, window, stats, tag)
 
 
 def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
@@ -384,17 +393,7 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     # the sector, per surviving pair, from R - A (the dense products above lose digits
     # relative to a small distance to the edge line: an end point almost on it)
     ie, idd = np.nonzero(ok)
-    e, d = e_rows[ie], diffr[idd]
-    x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
-    if window is not None:
-        inside = _in_keller_window(scene, window, d, t, np.hypot(x, y))
-        stats[f"{tag}_receiver_pairs_rejected_keller_window"] += int((~inside).sum())
-        e, d, x, y, t = e[inside], d[inside], x[inside], y[inside], t[inside]
-    sec, width, phi = _sector_in_table(ctx, d, x, y)
-    good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-    stats[f"{tag}_receiver_pairs_rejected_sector"] += int((~good).sum())
-    e, d, sec, phi, t, x, y = e[good], d[good], sec[good], phi[good], t[good], x[good], y[good]
-    return _EndSide(e, d, sec, phi, t, np.hypot(x, y))
+    return _kept_pairs_end_side(scene, ctx, rx_lv, e_rows[ie], diffr[idd], window, stats, tag)
 
 
 def _edge_frame(scene: "Scene", ctx: TxContext, points: np.ndarray, d: np.ndarray):

@@ -51,11 +51,14 @@ def _scene_file(case: Case, out_dir: str) -> str:
 
 
 def _explainer(scene, paths, sn, case: Case):
+    from ..topology.sectors import sector_table
+
     dih = scene.dihedra
+    sectors = sector_table(dih)
 
     def explain(side: str, i: int) -> str:
         if side == "sionna":
-            return _explain_sionna_only(scene, sn, i)
+            return _explain_sionna_only(scene, sn, i, sectors)
         kinds = paths.interactions[i, : paths.depth[i]]
         if (kinds == 2).any():
             d = int(paths.primitive[i][kinds.tolist().index(2)])
@@ -94,8 +97,11 @@ def _diffraction_dihedron(paths, i: int) -> int:
     return int(paths.primitive[i, kinds.index(2)]) if 2 in kinds else -1
 
 
-def _explain_sionna_only(scene, sn, j: int) -> str:
-    """Why a Sionna path has no wavepaths match: a topology rule wavepaths enforces, or a failure."""
+def _explain_sionna_only(scene, sn, j: int, sectors=None) -> str:
+    """Why a Sionna path has no wavepaths match: a topology rule wavepaths enforces, an edge that
+    is not a wedge, or a failure. ``sectors``: the scene's
+    :func:`~wavepaths.topology.sectors.sector_table`, built here when not given (callers that
+    explain many paths build it once)."""
     from ..topology.find_dihedron import find_dihedron
 
     kinds = sn.interactions[j, : sn.num_interactions[j]]
@@ -123,7 +129,7 @@ def _explain_sionna_only(scene, sn, j: int) -> str:
     if len(on) and not dih.diffracting[on].any():
         from ..topology.sectors import sector_of, sector_table
 
-        tab = sector_table(dih)
+        tab = sector_table(dih) if sectors is None else sectors
         dd = np.concatenate([on, on])
         sec, width = sector_of(tab, dd, np.concatenate([np.repeat(e[None], len(on), 0), np.repeat(r[None], len(on), 0)]),
                                dih.origin[dd])
