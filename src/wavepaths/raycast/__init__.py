@@ -32,8 +32,10 @@ Two implementations answer the question:
   recentred coordinates, the nearest face along two rays covering the segment; every hit
   is confirmed or overruled by the float64 rule on that face, and a segment whose float32
   answer float64 cannot confirm is decided in float64 against the whole scene.
-* :class:`~wavepaths.raycast.numpy_caster.NumpyRayCaster`: the float64 rule over every
-  (segment, triangle) pair, the reference; the tests hold the two together. The only
+* :class:`~wavepaths.raycast.numpy_caster.NumpyRayCaster`: the float64 rule on every
+  (segment, triangle) pair whose boxes can meet (found through a uniform grid of the
+  triangles; the brute-force product over all pairs stays as the tests' reference), the
+  reference; the tests hold the two together. The only
   float32 limit left in the Embree caster is a face the segment crosses within float32
   resolution (~1e-7 of the scene's half-size) of one of its edges, which Embree may miss;
   the search casts the segments of such near-boundary pairs in float64.
