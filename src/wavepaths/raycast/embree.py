@@ -63,6 +63,27 @@ class EmbreeRayCaster:
     def rays_cast(self) -> int:
         return self._rays
 
+    @property
+    def exact(self) -> ExactSegments:
+        """The float64 rule this caster decides by (triangle planes, tolerances; recentred coordinates)."""
+        return self._exact
+
+    def first_triangle(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(k,) int64: the triangle Embree meets first on the way from ``a`` to ``b`` (metres), -1 if none.
+
+        A float32 *hint*, not a decision: the face may merely graze the segment, touch
+        its end, or a face within float32 resolution of ``a`` may be missed. Callers
+        must prove whatever they conclude from it in float64 (see
+        :mod:`wavepaths.search.visibility`).
+        """
+        a = np.asarray(a, dtype=np.float64).reshape(-1, 3) - self._center
+        b = np.asarray(b, dtype=np.float64).reshape(-1, 3) - self._center
+        prim = np.full(len(a), -1, dtype=np.int64)
+        live = np.nonzero((a != b).any(axis=1))[0]
+        if len(live):
+            prim[live] = self._nearest(a[live], b[live])
+        return prim
+
     def occluded(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)

@@ -9,7 +9,11 @@ A :class:`TxContext` holds, for a set of transmitters:
   diffracting sector of the dihedron (wider than pi) and, for an image of order >= 1,
   whose edge lies beyond the image's last mirror and inside its beam (the incident leg
   leaves that mirror). Neither depends on the receiver nor on where on the edge the path
-  lands, so the other pairs are dropped here, once (``*_culled_beam`` counts the second).
+  lands, so the other pairs are dropped here, once (``*_culled_beam`` counts the second);
+* for the transmitters themselves (order 0), the part of each edge a transmitter may see
+  (:mod:`wavepaths.search.visibility`): pairs whose whole edge is proven hidden are dropped
+  (``*_culled_hidden``), and the window of the others bounds where their diffraction
+  points may fall.
 
 The context is all a coverage tile needs besides the scene; it is what a Dask worker
 receives once (see :mod:`wavepaths.coverage`).
@@ -26,6 +30,7 @@ from ..topology.sectors import SectorTable, sector_of, sector_table
 from .beams import Apertures, ChainBeams, build_chain_beams, chains_meeting_edges, edge_tree, scene_apertures
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
+from .visibility import VisibilityWindows, visibility_windows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -45,6 +50,10 @@ class DiffractionSources:
     key : (c,) int64
     unique_keys, key_start, key_count : (u,) int64
         Groups of equal keys in the sorted arrays.
+    visible : VisibilityWindows or None
+        Order 0 only: per pair, the part of the edge not proven hidden from the
+        transmitter (:mod:`wavepaths.search.visibility`); the pairs hidden along their
+        whole edge are not here.
     """
 
     chain: np.ndarray
@@ -53,6 +62,14 @@ class DiffractionSources:
     unique_keys: np.ndarray
     key_start: np.ndarray
     key_count: np.ndarray
+    visible: VisibilityWindows | None = None
+
+    def take(self, rows: np.ndarray) -> "DiffractionSources":
+        """The pairs ``rows`` (in their sorted order), regrouped."""
+        key = self.key[rows]
+        uk, start, count = _group(key)
+        vis = None if self.visible is None else self.visible.take(rows)
+        return DiffractionSources(self.chain[rows], self.dihedron[rows], key, uk, start, count, vis)
 
 
 @dataclass(frozen=True)
@@ -141,10 +158,18 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             c, d, sec = (np.concatenate(x) if x else np.zeros(0, np.int64) for x in (kept_c, kept_d, kept_s))
             stats[f"diffraction_sources_order_{a}_considered"] = len(lv) * len(diffracting)
             stats[f"diffraction_sources_order_{a}_culled_beam"] = len(lv) * len(diffracting) - tested
+            vis = None
+            if a == 0 and "source_visibility" not in options.disable_culling:
+                # the transmitters see part of each edge: pairs hidden along the whole edge go
+                vis = visibility_windows(scene, lv.last[c], d)
+                seen = ~vis.hidden
+                stats["diffraction_sources_order_0_culled_hidden"] = int((~seen).sum())
+                stats["visibility_rays"] = vis.rays
+                c, d, sec, vis = c[seen], d[seen], sec[seen], vis.take(np.nonzero(seen)[0])
             stats[f"diffraction_sources_order_{a}_kept"] = int(len(c))
             key = d * stride + sec
             o = np.lexsort((c, key))
             c, d, key = c[o], d[o], key[o]
             uk, start, count = _group(key)
-            sources.append(DiffractionSources(c, d, key, uk, start, count))
+            sources.append(DiffractionSources(c, d, key, uk, start, count, None if vis is None else vis.take(o)))
     return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures, edges)

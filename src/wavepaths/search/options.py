@@ -14,6 +14,8 @@ CULLING_TESTS: dict[str, str] = {
     "keller_window": "(receiver image, dihedron) pairs whose diffraction point falls off the edge for every source",
     "reflection_beam": "(receiver, image chain) pairs whose receiver no beam of the chain can reach",
     "source_beam": "(transmitter image, dihedron) pairs whose edge lies outside the image's beam",
+    "source_visibility": "(transmitter, dihedron) pairs whose edge is proven hidden from the transmitter, and "
+                         "candidates whose diffraction point lies in a proven shadow",
 }
 """The conservative culling tests that :attr:`TraceOptions.disable_culling` can switch off."""
 
@@ -24,6 +26,7 @@ CULLING_COUNTERS: dict[str, str] = {
     "keller_window": r"diffraction_\dr_\dr_receiver_pairs_rejected_keller_window",
     "reflection_beam": r"reflection_order_\d_culled_beam",
     "source_beam": r"diffraction_sources_order_\d_culled_beam",
+    "source_visibility": r"diffraction_sources_order_\d_culled_hidden|diffraction_\dr_\dr_rejected_hidden",
 }
 """The ``Paths.stats`` keys (regular expressions) under which each culling test counts what it drops."""
 

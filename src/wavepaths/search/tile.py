@@ -21,6 +21,7 @@ from .context import TxContext
 from .geometry import diffraction_point_reduced
 from .images import ImageLevel, backtrace, build_image_levels
 from .paths import InteractionType, PathBatch
+from .visibility import VisibilityWindows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -166,8 +167,6 @@ def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.
     angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
     with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
     """
-    from .context import DiffractionSources
-
     if len(src.chain) == 0 or len(targets) == 0:
         return src
     c = targets.mean(axis=0)
@@ -199,9 +198,7 @@ def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.
     keep = reach_a & reach_b
     if keep.all():
         return src
-    chain, dih, key = src.chain[keep], src.dihedron[keep], src.key[keep]
-    uk, start, count = np.unique(key, return_index=True, return_counts=True)
-    return DiffractionSources(chain, dih, key, uk, start.astype(np.int64), count.astype(np.int64))
+    return src.take(np.nonzero(keep)[0])
 
 
 def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
@@ -251,34 +248,47 @@ class _EndSide:
     phi: np.ndarray
     t: np.ndarray
     rho: np.ndarray
+    visible: VisibilityWindows | None = None  # transmitter side of order 0: the part of each edge it may see
 
 
-def _keller_window(scene: "Scene", tside: _EndSide) -> tuple[np.ndarray, np.ndarray]:
+def _keller_window(scene: "Scene", tside: _EndSide):
     """Per dihedron, the window of receiver coordinates some transmitter-side source can reach on the edge.
 
-    The closed-form point ``t = (t_e d_r + t_r d_e) / (d_e + d_r)`` (seed §2.3) lies on the
-    edge ``0 <= t <= L`` iff ``t_r >= (-t_e / d_e) d_r`` and ``t_r - L <= ((L - t_e) / d_e) d_r``.
-    Returns ``lo``, ``hi`` (n_dihedra,): the smallest ``-t_e / d_e`` and the largest
-    ``(L - t_e) / d_e`` over the sources of each dihedron (``+inf``, ``-inf`` without one),
-    so a receiver-side pair that fails ``t_r >= lo d_r`` or ``t_r - L <= hi d_r`` has no
-    source whose point lies on the edge (:func:`_in_keller_window`). The two bounds may come
-    from different sources: conservative.
+    The closed-form point ``t = (t_e d_r + t_r d_e) / (d_e + d_r)`` (seed §2.3) lies in a
+    part ``v_lo <= t <= v_hi`` of the edge (the whole edge ``[0, L]``, or the part the
+    transmitter may see, :mod:`wavepaths.search.visibility`) iff
+    ``t_r - v_lo >= ((v_lo - t_e) / d_e) d_r`` and ``t_r - v_hi <= ((v_hi - t_e) / d_e) d_r``.
+    Returns ``(v_lo, lo, v_hi, hi)`` (n_dihedra,) each: per dihedron the smallest ``v_lo``
+    and ``(v_lo - t_e) / d_e``, the largest ``v_hi`` and ``(v_hi - t_e) / d_e`` over its
+    sources (``+inf``, ``-inf`` without one). As ``d_r >= 0``, a receiver-side pair that
+    fails ``t_r >= v_lo + lo d_r`` or ``t_r <= v_hi + hi d_r`` has no source whose point
+    lies on that part of the edge (:func:`_in_keller_window`). The bounds may come from
+    different sources: conservative.
     """
     n = len(scene.dihedra.length)
-    lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
+    L = scene.dihedra.length[tside.dihedron]
+    if tside.visible is None:
+        v_lo, v_hi = np.zeros(len(L)), L
+    else:
+        v_lo, v_hi = tside.visible.bounds(L)
+        tau = tside.visible.tau
+        v_lo, v_hi = v_lo - tau, v_hi + tau
+    out = [np.full(n, np.inf), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, -np.inf)]
     with np.errstate(divide="ignore", invalid="ignore"):
-        np.minimum.at(lo, tside.dihedron, -tside.t / tside.rho)
-        np.maximum.at(hi, tside.dihedron, (scene.dihedra.length[tside.dihedron] - tside.t) / tside.rho)
-    return lo, hi
+        np.minimum.at(out[0], tside.dihedron, v_lo)
+        np.minimum.at(out[1], tside.dihedron, (v_lo - tside.t) / tside.rho)
+        np.maximum.at(out[2], tside.dihedron, v_hi)
+        np.maximum.at(out[3], tside.dihedron, (v_hi - tside.t) / tside.rho)
+    return tuple(out)
 
 
 def _in_keller_window(scene: "Scene", window, d: np.ndarray, t: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """(k,) bool: the receiver-side pairs (dihedron ``d``, coordinates ``t``, ``rho``) inside ``window``
     (:func:`_keller_window`), with a margin of ``1e-9`` of the scene size."""
-    lo, hi = window
+    v_lo, lo, v_hi, hi = window
     tol = scene.length_tolerance(1e-9)
     with np.errstate(invalid="ignore", over="ignore"):
-        return (t - lo[d] * rho >= -tol) & (t - scene.dihedra.length[d] - hi[d] * rho <= tol)
+        return (t - v_lo[d] - lo[d] * rho >= -tol) & (t - v_hi[d] - hi[d] * rho <= tol)
 
 
 def _sector_in_table(ctx: TxContext, d: np.ndarray, x: np.ndarray, y: np.ndarray):
@@ -411,7 +421,7 @@ def _transmitter_side(scene: "Scene", ctx: TxContext, tx_lv: ImageLevel, src) ->
     d = src.dihedron
     x, y, t = _edge_frame(scene, ctx, tx_lv.last[src.chain], d)
     sec, _, phi = _sector_in_table(ctx, d, x, y)
-    return _EndSide(src.chain, d, sec, phi, t, np.hypot(x, y))
+    return _EndSide(src.chain, d, sec, phi, t, np.hypot(x, y), src.visible)
 
 
 def diffraction_tile(
@@ -504,6 +514,11 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     t = diffraction_point_reduced(te, de, tr, dr)
     on = (t >= 0) & (t <= dihedra.length[d])
     stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
+    if tside.visible is not None:
+        # the point lies in a shadow proven from the transmitter (the first leg is blocked)
+        seen = tside.visible.may_see(src_rows, t, dihedra.length[d])
+        stats[f"{tag}_rejected_hidden"] += int((on & ~seen).sum())
+        on &= seen
     rows, src_rows, d, t = rows[on], src_rows[on], d[on], t[on]
     phi, phi_prime = rside.phi[rows], tside.phi[src_rows]
     sec = rside.sector[rows]

@@ -1,0 +1,90 @@
+"""The part of an edge a transmitter may see (search/visibility.py): proven shadows only."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths.em.materials import PEC
+from wavepaths.raycast.numpy_caster import NumpyRayCaster
+from wavepaths.scene import load_scene
+from wavepaths.scene.builtin import SceneBuilder
+from wavepaths.scene.model import build_scene
+from wavepaths.search.visibility import visibility_windows
+
+
+def _wall_and_block(wall_y: tuple[float, float]):
+    """A screen in the plane x = 5 (y in ``wall_y``, z in [0, 2]) in front of a block whose
+    front top edge runs along y at x = 10, z = 0.5, from y = -5 to 5."""
+    b = SceneBuilder()
+    y0, y1 = wall_y
+    b.add_quad("wall", PEC, [[5, y0, 0], [5, y1, 0], [5, y1, 2], [5, y0, 2]])
+    b.add_box("block", PEC, (10, -5, 0), (12, 5, 0.5))
+    return build_scene(*b.arrays())
+
+
+def _front_top_edge(scene) -> int:
+    dh = scene.dihedra
+    mid = dh.origin + 0.5 * dh.length[:, None] * dh.direction
+    hit = np.nonzero(np.isclose(mid[:, 0], 10) & np.isclose(mid[:, 2], 0.5) & np.isclose(dh.length, 10))[0]
+    assert len(hit) == 1
+    return int(hit[0])
+
+
+S = np.array([[0.0, 0.0, 1.0]])
+
+
+def test_window_is_the_part_of_the_edge_the_screen_leaves_in_view():
+    # from S = (0, 0, 1), the ray to (10, y, 0.5) crosses x = 5 at (5, y / 2, 0.75): the
+    # screen y in [-6, 1] hides y in [-12, 2), so only y in [2, 5] of the edge is seen
+    scene = _wall_and_block((-6.0, 1.0))
+    d = _front_top_edge(scene)
+    v = visibility_windows(scene, S, np.array([d]))
+    dh = scene.dihedra
+    y_lo, y_hi = sorted(dh.origin[d, 1] + np.array([v.lo[0], v.hi[0]]) * dh.direction[d, 1])
+    assert not v.hidden[0]
+    assert y_lo == pytest.approx(2.0, abs=1e-6)
+    assert y_hi == pytest.approx(5.0, abs=1e-9)
+    # the end at y = -5 is hidden, the end at y = 5 is seen
+    ends_y = dh.origin[d, 1] + np.array([0.0, dh.length[d]]) * dh.direction[d, 1]
+    assert list(np.array([v.open0[0], v.open1[0]])[np.argsort(ends_y)]) == [False, True]
+
+
+def test_an_edge_behind_a_wide_screen_is_hidden_ends_included():
+    scene = _wall_and_block((-6.0, 6.0))
+    d = _front_top_edge(scene)
+    v = visibility_windows(scene, S, np.array([d]))
+    assert v.hidden[0]
+    assert not v.may_see(np.array([0]), np.array([0.0, 5.0, 10.0]), np.full(3, 10.0)).any()
+
+
+def test_without_first_face_hints_every_window_is_the_whole_edge(monkeypatch):
+    scene = _wall_and_block((-6.0, 6.0))
+    d = _front_top_edge(scene)
+    monkeypatch.setitem(scene.__dict__, "raycaster", NumpyRayCaster(scene))
+    v = visibility_windows(scene, S, np.array([d]))
+    assert v.lo[0] == 0 and v.hi[0] == pytest.approx(10.0) and not v.hidden[0]
+
+
+@pytest.mark.parametrize("tx", [(-60.0, 0.0, 10.0), (20.0, 5.0, 1.5), (0.0, -30.0, 35.0), (70.0, 30.0, 2.0)])
+def test_every_edge_point_seen_in_float64_lies_in_its_window(tx):
+    """Soundness: sample every diffracting edge of the street canyon (41 points, ends
+    included) and decide each in float64 with the reference caster; a point it sees must be
+    inside its window (within tau) or an open end. And the windows must prove something."""
+    scene = load_scene("street_canyon")
+    dh = scene.dihedra
+    d = np.nonzero(dh.diffracting)[0]
+    src = np.broadcast_to(np.asarray(tx), (len(d), 3))
+    v = visibility_windows(scene, src, d)
+    k = 41
+    t = np.linspace(0.0, 1.0, k)[None, :] * dh.length[d][:, None]
+    pts = dh.origin[d][:, None, :] + t[..., None] * dh.direction[d][:, None, :]
+    seen = ~NumpyRayCaster(scene).occluded(np.repeat(src, k, axis=0), pts.reshape(-1, 3)).reshape(len(d), k)
+    rows = np.repeat(np.arange(len(d)), k)
+    may = v.may_see(rows, t.ravel(), np.repeat(dh.length[d], k)).reshape(len(d), k)
+    assert not (seen & ~may).any()
+    # not vacuous: some edges wholly hidden, some windows shorter than their edge
+    assert v.hidden.any()
+    partly = ~v.hidden & ((v.lo > 0) | (v.hi < dh.length[d]))
+    assert partly.any()
+    assert (seen.any(axis=1) & ~v.hidden).any()
