@@ -68,6 +68,7 @@ class ExactSegments:
         pd = scene.polygon_offset[poly] - pn @ self.center
         dev = np.abs(np.einsum("fij,fj->fi", c, pn) - pd[:, None]).max(axis=1)
         self.tol = plane_tolerance(scene) + dev  # (f,) per-triangle plane tolerance [m]
+        self.diagonal = float(scene.diagonal)
         self.edge_tol = 1e-12 * scene.diagonal
         # triangles around each vertex (CSR), for grazes along a coplanar face's boundary
         self.triangles = scene.triangles

@@ -30,7 +30,7 @@ from ..topology.sectors import SectorTable, sector_of, sector_table
 from .beams import Apertures, ChainBeams, build_chain_beams, chains_meeting_edges, edge_tree, scene_apertures
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
-from .visibility import VisibilityWindows, visibility_windows
+from .visibility import VisibilityWindows, aperture_windows, visibility_windows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -51,9 +51,11 @@ class DiffractionSources:
     unique_keys, key_start, key_count : (u,) int64
         Groups of equal keys in the sorted arrays.
     visible : VisibilityWindows or None
-        Order 0 only: per pair, the part of the edge not proven hidden from the
-        transmitter (:mod:`wavepaths.search.visibility`); the pairs hidden along their
-        whole edge are not here.
+        Per pair, the part of the edge its incident leg may reach: at order 0, the part
+        not proven hidden from the transmitter (:func:`~wavepaths.search.visibility.visibility_windows`);
+        at order >= 1, where a leg from the edge to the image can cross the last mirror
+        (:func:`~wavepaths.search.visibility.aperture_windows`). Pairs whose window is
+        empty are not here. ``None`` when the culling test is switched off.
     """
 
     chain: np.ndarray
@@ -166,6 +168,14 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
                 stats["diffraction_sources_order_0_culled_hidden"] = int((~seen).sum())
                 stats["visibility_rays"] = vis.rays
                 c, d, sec, vis = c[seen], d[seen], sec[seen], vis.take(np.nonzero(seen)[0])
+            elif a >= 1 and "aperture_window" not in options.disable_culling:
+                # the incident leg leaves the last mirror: only where it can cross that mirror
+                lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
+                reach = lo <= hi
+                stats[f"diffraction_sources_order_{a}_culled_aperture"] = int((~reach).sum())
+                none = np.zeros(int(reach.sum()), dtype=bool)
+                c, d, sec = c[reach], d[reach], sec[reach]
+                vis = VisibilityWindows(lo[reach], hi[reach], none, none, scene.length_tolerance(1e-9), 0, 0)
             stats[f"diffraction_sources_order_{a}_kept"] = int(len(c))
             key = d * stride + sec
             o = np.lexsort((c, key))

@@ -16,6 +16,8 @@ CULLING_TESTS: dict[str, str] = {
     "source_beam": "(transmitter image, dihedron) pairs whose edge lies outside the image's beam",
     "source_visibility": "(transmitter, dihedron) pairs whose edge is proven hidden from the transmitter, and "
                          "candidates whose diffraction point lies in a proven shadow",
+    "aperture_window": "(transmitter image, dihedron) pairs whose edge has no point from which a leg to the image "
+                       "crosses its last mirror, and candidates whose diffraction point lies outside that window",
 }
 """The conservative culling tests that :attr:`TraceOptions.disable_culling` can switch off."""
 
@@ -27,6 +29,7 @@ CULLING_COUNTERS: dict[str, str] = {
     "reflection_beam": r"reflection_order_\d_culled_beam",
     "source_beam": r"diffraction_sources_order_\d_culled_beam",
     "source_visibility": r"diffraction_sources_order_\d_culled_hidden|diffraction_\dr_\dr_rejected_hidden",
+    "aperture_window": r"diffraction_sources_order_\d_culled_aperture|diffraction_\dr_\dr_rejected_aperture",
 }
 """The ``Paths.stats`` keys (regular expressions) under which each culling test counts what it drops."""
 

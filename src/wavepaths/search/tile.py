@@ -248,7 +248,7 @@ class _EndSide:
     phi: np.ndarray
     t: np.ndarray
     rho: np.ndarray
-    visible: VisibilityWindows | None = None  # transmitter side of order 0: the part of each edge it may see
+    visible: VisibilityWindows | None = None  # transmitter side: the part of each edge its incident leg may reach
 
 
 def _keller_window(scene: "Scene", tside: _EndSide):
@@ -515,9 +515,10 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     on = (t >= 0) & (t <= dihedra.length[d])
     stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
     if tside.visible is not None:
-        # the point lies in a shadow proven from the transmitter (the first leg is blocked)
+        # order 0: the point lies in a shadow proven from the transmitter (the first leg is
+        # blocked); order >= 1: the leg to the last image cannot cross the last mirror
         seen = tside.visible.may_see(src_rows, t, dihedra.length[d])
-        stats[f"{tag}_rejected_hidden"] += int((on & ~seen).sum())
+        stats[f"{tag}_rejected_{'hidden' if a == 0 else 'aperture'}"] += int((on & ~seen).sum())
         on &= seen
     rows, src_rows, d, t = rows[on], src_rows[on], d[on], t[on]
     phi, phi_prime = rside.phi[rows], tside.phi[src_rows]

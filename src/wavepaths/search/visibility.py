@@ -104,7 +104,7 @@ class VisibilityWindows:
 
 
 def shadow_intervals(exact: "ExactSegments", S: np.ndarray, tri: np.ndarray, A: np.ndarray, w: np.ndarray,
-                     L: np.ndarray, proven: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                     L: np.ndarray, mode: str = "proven") -> tuple[np.ndarray, np.ndarray]:
     """Edge parameters ``t`` whose segment from ``S`` passes through triangle ``tri``.
 
     Parameters
@@ -119,10 +119,12 @@ def shadow_intervals(exact: "ExactSegments", S: np.ndarray, tri: np.ndarray, A: 
         Unit edge directions.
     L : (k,) float64
         Edge lengths [m].
-    proven : bool
-        With margins, so that the occlusion rule blocks every ``t`` of the interval
-        (below); without, the nominal shadow (the crossing anywhere in the closed
-        triangle), used only to tell whether two shadows abut.
+    mode : {"proven", "nominal", "expanded"}
+        ``proven``: with margins, so that the occlusion rule blocks every ``t`` of the
+        interval (below). ``nominal``: the crossing anywhere in the closed triangle, used
+        only to tell whether two shadows abut. ``expanded``: a superset, for apertures
+        (:func:`aperture_windows`): the crossing within ``1e-7 (1 + diag / |s_S|)`` of the
+        triangle (angular), the end within ``tol`` of the plane.
 
     Returns
     -------
@@ -162,8 +164,15 @@ edge) shadows nothing.
     dmax = np.maximum(np.linalg.norm(A - S, axis=1), np.linalg.norm(B - S, axis=1))
     with np.errstate(divide="ignore", invalid="ignore"):
         eps = np.maximum(1e-9, 2 * (tol + exact.edge_tol) / np.abs(s_s))
-    if not proven:
+    if mode == "nominal":
         eps = np.zeros_like(eps)
+    elif mode == "expanded":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            eps = -1e-7 * (1 + exact.diagonal / np.abs(s_s))
+        tol = -0.5 * tol
+        valid = np.abs(s_s) > 0
+    elif mode != "proven":
+        raise ValueError(f"unknown mode {mode!r}")
     alphas = [-sigma * (np.einsum("ij,ij->i", n, A) - off) - 2 * tol]
     betas = [-sigma * np.einsum("ij,ij->i", n, w)]
     for i in range(3):
@@ -241,7 +250,7 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
             h = np.nonzero(hit)[0]
             args = (exact, Sr[idx[h]], tri[h], A[idx[h]], w[idx[h]], L[idx[h]])
             s_lo[h], s_hi[h] = shadow_intervals(*args)
-            n_lo[h], n_hi[h] = shadow_intervals(*args, proven=False)
+            n_lo[h], n_hi[h] = shadow_intervals(*args, mode="nominal")
         nl = len(il)
         # left end: the face's nominal shadow reaches back to it (within tau), its proven
         # shadow beyond the probe; the end moves to the far side of the proven shadow
@@ -257,3 +266,157 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
     open_ends = ~caster.occluded(np.concatenate([S, S]), ends)
     rays += 2 * len(d)
     return VisibilityWindows(lo, hi, open_ends[: len(d)], open_ends[len(d):], tau, rays, rounds)
+
+
+APERTURE_MAX_TRIANGLES = 16
+"""Mirrors with more triangles than this get no aperture window (the whole edge)."""
+
+
+@dataclass(frozen=True)
+class AperturePlanes:
+    """The expanded frusta from images through their last mirrors' triangles.
+
+    Row ``r`` of the CSR ``ptr`` (one per image) lists the image's triangles; each
+    (image, triangle) gives four half-spaces ``N.E + O - eps D >= 0`` in recentred
+    coordinates: beyond the mirror's plane, and inside each side's plane through the
+    image (:func:`shadow_intervals`, ``expanded`` mode; ``D`` depends on the edge).
+
+    Attributes
+    ----------
+    ptr : (k + 1,) int64
+    N : (r, 4, 3) float64
+    O : (r, 4) float64
+    eps : (r,) float64
+        Zero for the mirror's plane row, ``-1e-7 (1 + diag / |s_I|)`` for the sides.
+    valid : (r,) bool
+    whole : (k,) bool
+        Images whose mirror has too many triangles: their window is the whole edge.
+    I : (k, 3) float64
+        The images, recentred.
+    center : (3,) float64
+    """
+
+    ptr: np.ndarray
+    N: np.ndarray
+    O: np.ndarray
+    eps: np.ndarray
+    valid: np.ndarray
+    whole: np.ndarray
+    I: np.ndarray
+    center: np.ndarray
+
+
+def aperture_planes(scene: "Scene", I: np.ndarray, q: np.ndarray) -> AperturePlanes | None:
+    """:class:`AperturePlanes` of images ``I`` (k, 3) through their mirrors ``q`` (k,); ``None`` without the float64 rule."""
+    exact = getattr(scene.raycaster, "exact", None)
+    if exact is None:
+        return None
+    ptr_q = scene.polygon_tri_ptr
+    count = ptr_q[q + 1] - ptr_q[q]
+    whole = count > APERTURE_MAX_TRIANGLES
+    count = np.where(whole, 0, count)
+    ptr = np.concatenate([[0], np.cumsum(count)]).astype(np.int64)
+    rows = np.repeat(np.arange(len(q)), count)
+    offs = np.arange(len(rows)) - np.repeat(ptr[:-1], count)
+    tri = scene.polygon_tris[ptr_q[q[rows]] + offs]
+    c0 = exact.center
+    S = I[rows] - c0
+    c = exact.corners[tri]
+    n, off, tol = exact.normal[tri], exact.offset[tri], exact.tol[tri]
+    s_s = np.einsum("ij,ij->i", n, S) - off
+    sigma = np.sign(s_s)
+    valid = s_s != 0
+    N = np.empty((len(rows), 4, 3))
+    O = np.empty((len(rows), 4))
+    N[:, 0] = -sigma[:, None] * n
+    O[:, 0] = sigma * off + tol
+    for i in range(3):
+        ci, cj, ck = c[:, i] - S, c[:, (i + 1) % 3] - S, c[:, (i + 2) % 3] - S
+        m = np.cross(ci, cj)
+        norm = np.linalg.norm(m, axis=1)
+        valid &= norm > 0
+        m = m / np.where(norm > 0, norm, 1.0)[:, None]
+        orient = np.sign(np.einsum("ij,ij->i", m, ck))
+        valid &= orient != 0
+        N[:, i + 1] = orient[:, None] * m
+        O[:, i + 1] = -np.einsum("ij,ij->i", N[:, i + 1], S)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eps = -1e-7 * (1 + exact.diagonal / np.abs(s_s))
+    return AperturePlanes(ptr, N, O, np.where(valid, eps, 0.0), valid, whole, I - c0, c0)
+
+
+def windows_through(scene: "Scene", planes: AperturePlanes, image: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per (image row ``image[i]`` of ``planes``, dihedron ``d[i]``), the aperture window on the edge.
+
+    Returns ``lo, hi`` (k,): the hull over the mirror's triangles of the ``t`` in
+    ``[0, L]`` satisfying their four half-spaces, widened by ``1e-9`` of the scene diagonal;
+    ``lo > hi`` when empty (see :func:`aperture_windows`).
+    """
+    dihedra = scene.dihedra
+    L = dihedra.length[d].astype(np.float64)
+    k = len(d)
+    lo, hi = np.zeros(k), L.copy()
+    if k == 0:
+        return lo, hi
+    count = planes.ptr[image + 1] - planes.ptr[image]
+    sel = np.nonzero(~planes.whole[image])[0]
+    c = count[sel]
+    pair = np.repeat(sel, c)
+    row = np.repeat(planes.ptr[image[sel]], c) + (np.arange(len(pair)) - np.repeat(np.cumsum(c) - c, c))
+    A = dihedra.origin[d] - planes.center
+    w = dihedra.direction[d]
+    B = A + L[:, None] * w
+    # D: the farthest edge end from the image, for the angular margin
+    Ii = planes.I[image]
+    D = np.maximum(np.linalg.norm(A - Ii, axis=1), np.linalg.norm(B - Ii, axis=1))
+    N = planes.N[row]
+    alpha = np.einsum("rij,rj->ri", N, A[pair]) + planes.O[row]
+    beta = np.einsum("rij,rj->ri", N, w[pair])
+    alpha[:, 1:] -= (planes.eps[row] * D[pair])[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = -alpha / beta
+    t_lo = np.maximum(0.0, np.where(beta > 0, root, -np.inf).max(axis=1))
+    t_hi = np.minimum(L[pair], np.where(beta < 0, root, np.inf).min(axis=1))
+    ok = planes.valid[row] & ~((beta == 0) & (alpha < 0)).any(axis=1)
+    t_lo, t_hi = np.where(ok, t_lo, np.inf), np.where(ok, t_hi, -np.inf)
+    w_lo, w_hi = np.full(k, np.inf), np.full(k, -np.inf)
+    np.minimum.at(w_lo, pair, t_lo)
+    np.maximum.at(w_hi, pair, t_hi)
+    tau = scene.length_tolerance(1e-9)
+    lo[sel] = np.maximum(w_lo[sel] - tau, 0.0)
+    hi[sel] = np.minimum(w_hi[sel] + tau, L[sel])
+    return lo, hi
+
+
+def aperture_windows(scene: "Scene", I: np.ndarray, q: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where on edge ``d[i]`` a leg toward the image ``I[i]`` can cross its mirror ``q[i]``.
+
+    For the image method, the leg from a point ``E(t)`` of the edge to the image ``I`` of
+    the mirror ``q`` next to the edge must cross ``q``'s plane inside ``q``. The edge
+    parameters for which it does form the interval of :func:`shadow_intervals` of ``q``'s
+    triangles seen from ``I`` (in ``expanded`` mode, a superset of what the back-trace
+    accepts: its barycentric margin is 1e-9), hulled over the triangles.
+
+    Parameters
+    ----------
+    scene : Scene
+    I : (k, 3) float64
+        Images [m].
+    q : (k,) int64
+        Their last mirrors (polygons).
+    d : (k,) int64
+        Dihedra.
+
+    Returns
+    -------
+    lo, hi : (k,) float64
+        The window, widened by ``1e-9`` of the scene diagonal; ``lo > hi`` when no point of
+        the edge can reach the mirror (the pair carries no path). Mirrors with more than
+        :data:`APERTURE_MAX_TRIANGLES` triangles, or a caster without the float64 rule,
+        give the whole edge.
+    """
+    planes = aperture_planes(scene, np.asarray(I, dtype=np.float64).reshape(-1, 3), np.asarray(q, dtype=np.int64))
+    if planes is None:
+        L = scene.dihedra.length[d].astype(np.float64)
+        return np.zeros(len(d)), L.copy()
+    return windows_through(scene, planes, np.arange(len(d)), np.asarray(d, dtype=np.int64))
