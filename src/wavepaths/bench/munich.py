@@ -138,8 +138,8 @@ def munich_sample(progress_file: str, cell_size: float = 2.0, options: dict | No
 
 
 def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARGET_BYTES, cell_size: float = 2.0,
-               options: dict | None = None, probe: bool = True, probe_timeout_s: float = 300.0,
-               progress=print, sample_first: bool = True, sample_timeout_s: float = 1200.0) -> dict:
+               options: dict | None = None, probe: bool = True, probe_timeout_s: float = 900.0,
+               progress=print, sample_first: bool = True, sample_timeout_s: float = 900.0) -> dict:
     """Run the munich map once in a child process; report how far it got.
 
     With ``sample_first``, a child first builds the transmitter context and traces one tile
