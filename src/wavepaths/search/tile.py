@@ -251,7 +251,7 @@ class _EndSide:
     visible: VisibilityWindows | None = None  # transmitter side: the part of each edge its incident leg may reach
 
 
-def _keller_window(scene: "Scene", tside: _EndSide):
+def _keller_window(scene: "Scene", tside: _EndSide) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per dihedron, the window of receiver coordinates some transmitter-side source can reach on the edge.
 
     The closed-form point ``t = (t_e d_r + t_r d_e) / (d_e + d_r)`` (seed §2.3) lies in a

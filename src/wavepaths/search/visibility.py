@@ -15,9 +15,13 @@ names the first triangle on it, a hint only. The *shadow interval* of that trian
 (:func:`shadow_intervals`: the edge points whose segment from ``S`` crosses the triangle's
 interior by a margin, solved exactly as the intersection of four half-lines in ``t``) is
 computed in float64; when it covers the window end, the end moves to the far side of
-the interval and the march goes on from just beyond that face's nominal shadow; otherwise (nothing hit, a graze, a face at the probe
-itself) that end stops. Each step skips a whole face's shadow, so a wall of a few
-triangles takes a few steps.
+the interval and the march goes on from just beyond that face's nominal shadow;
+otherwise (nothing hit, a graze, a face at the probe itself) that end stops. Each step
+skips a whole face's shadow, so a wall of a few triangles takes a few steps.
+
+The same half-spaces, with the margins reversed, give the *aperture window* of an image
+(:func:`aperture_windows`): where on an edge a leg toward the image can cross the image's
+last mirror.
 
 What is proven. The shadow intervals are shrunk by margins so that the occlusion rule
 blocks every point of them. The shadows of two triangles of one wall meet at their common
@@ -54,7 +58,7 @@ class VisibilityWindows:
     Attributes
     ----------
     lo, hi : (k,) float64
-        The window ``[lo, hi]`` along the edge [m from its origin], within ``[0, L]``;
+        The window ``[lo, hi]`` along the edge [m from its origin], within ``[0, L]``.
         Each end is open once it has moved (the shadow that moved it covers it), so
         ``lo >= hi`` when the edge's inside is proven hidden.
     open0, open1 : (k,) bool
@@ -119,12 +123,10 @@ def shadow_intervals(exact: "ExactSegments", S: np.ndarray, tri: np.ndarray, A: 
         Unit edge directions.
     L : (k,) float64
         Edge lengths [m].
-    mode : {"proven", "nominal", "expanded"}
+    mode : {"proven", "nominal"}
         ``proven``: with margins, so that the occlusion rule blocks every ``t`` of the
         interval (below). ``nominal``: the crossing anywhere in the closed triangle, used
-        only to tell whether two shadows abut. ``expanded``: a superset, for apertures
-        (:func:`aperture_windows`): the crossing within ``1e-7 (1 + diag / |s_S|)`` of the
-        triangle (angular), the end within ``tol`` of the plane.
+        only to tell whether two shadows abut.
 
     Returns
     -------
@@ -166,11 +168,6 @@ edge) shadows nothing.
         eps = np.maximum(1e-9, 2 * (tol + exact.edge_tol) / np.abs(s_s))
     if mode == "nominal":
         eps = np.zeros_like(eps)
-    elif mode == "expanded":
-        with np.errstate(divide="ignore", invalid="ignore"):
-            eps = -1e-7 * (1 + exact.diagonal / np.abs(s_s))
-        tol = -0.5 * tol
-        valid = np.abs(s_s) > 0
     elif mode != "proven":
         raise ValueError(f"unknown mode {mode!r}")
     alphas = [-sigma * (np.einsum("ij,ij->i", n, A) - off) - 2 * tol]
@@ -277,9 +274,11 @@ class AperturePlanes:
     """The expanded frusta from images through their last mirrors' triangles.
 
     Row ``r`` of the CSR ``ptr`` (one per image) lists the image's triangles; each
-    (image, triangle) gives four half-spaces ``N.E + O - eps D >= 0`` in recentred
-    coordinates: beyond the mirror's plane, and inside each side's plane through the
-    image (:func:`shadow_intervals`, ``expanded`` mode; ``D`` depends on the edge).
+    (image, triangle) gives four half-spaces in recentred coordinates, those of
+    :func:`shadow_intervals` with the margins reversed (a superset): the edge point ``E``
+    beyond the mirror's plane or within its plane tolerance, ``N_0.E + O_0 >= 0``; and
+    inside each side's plane through the image within an angle,
+    ``N_i.E + O_i - eps D >= 0`` (``D`` the farthest edge end from the image).
 
     Attributes
     ----------
@@ -287,7 +286,10 @@ class AperturePlanes:
     N : (r, 4, 3) float64
     O : (r, 4) float64
     eps : (r,) float64
-        Zero for the mirror's plane row, ``-1e-7 (1 + diag / |s_I|)`` for the sides.
+        The sides' angular margin, ``-1e-7 (1 + diag / |s_I|)`` (``s_I`` the image's
+        distance to the triangle's plane): the back-trace's barycentric margin (1e-9)
+        puts its crossing at most about ``1e-9 diag`` outside a side, which is at most
+        ``1e-9 diag / |s_I|`` in angle seen from the image.
     valid : (r,) bool
     whole : (k,) bool
         Images whose mirror has too many triangles: their window is the whole edge.
@@ -393,9 +395,9 @@ def aperture_windows(scene: "Scene", I: np.ndarray, q: np.ndarray, d: np.ndarray
 
     For the image method, the leg from a point ``E(t)`` of the edge to the image ``I`` of
     the mirror ``q`` next to the edge must cross ``q``'s plane inside ``q``. The edge
-    parameters for which it does form the interval of :func:`shadow_intervals` of ``q``'s
-    triangles seen from ``I`` (in ``expanded`` mode, a superset of what the back-trace
-    accepts: its barycentric margin is 1e-9), hulled over the triangles.
+    parameters for which it does form an interval per triangle of ``q`` (the half-spaces
+    of :class:`AperturePlanes`: a superset of what the back-trace accepts, whose
+    barycentric margin is 1e-9), hulled over the triangles.
 
     Parameters
     ----------
