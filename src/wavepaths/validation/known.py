@@ -39,7 +39,14 @@ KNOWN_DISAGREEMENTS = [
         "reason": "Measured on simple_street_canyon (validation case and tests/validation): at max_depth=2 Sionna's "
                   "D-R paths equal wavepaths' compat values to 1e-3 dB; at max_depth=3 the same paths drop while "
                   "D, R-D, R-D-R and D-R-R paths do not. A path's field cannot depend on the search depth; "
-                  "wavepaths' value does not.",
+                  "wavepaths' value does not. Mechanism (etoile_crop, 2 receivers, every D-R path to 0.01 dB): "
+                  "Sionna's FieldCalculator._diffraction_compute_s_s_prime adds the segment to the vertex stored "
+                  "in the slot after the last interaction (interaction type NONE, a leftover point) before it "
+                  "stops, then the segment from that point to the receiver, so s, the distance after the "
+                  "diffraction, includes a detour that is not on the path; the spreading "
+                  "1/sqrt(s s' (s + s')) with that s gives Sionna's max_depth=3 value. With max_depth=2 there is "
+                  "no such slot. KP's s for a diffracted ray reflected by a plane is the unfolded length, as "
+                  "wavepaths uses.",
         "who_matches_exact": "wavepaths (consistent); Sionna at max_depth=2",
     },
     {
@@ -49,6 +56,35 @@ KNOWN_DISAGREEMENTS = [
         "reason": "Sionna RT 2.2 finds wedges from opposite half-edges inside one mesh; wavepaths builds one "
                   "dihedron per edge from every face of every object on it (seed §3.2).",
         "who_matches_exact": "topology rule (no exact solution)",
+    },
+    {
+        "id": "non-manifold-edge-wedge",
+        "what": "On an edge where three or more faces of one mesh meet (two blocks of one building sharing a party "
+                "wall, their facades continuing each other), Sionna diffracts with one block's right-angled corner "
+                "(n = 1.5); wavepaths with the edge's free-space sector, nearly flat (n = 1.0005 on etoile_crop), "
+                "whose coefficient is tens of dB smaller",
+        "reason": "Sionna RT 2.2 builds its wedge from one pair of the mesh's half-edges (Mitsuba's "
+                  "opposite_dedge): two of the faces, ignoring the other block's solid. On etoile_crop (benchmark 2) "
+                  "25 matched R-D and R-D-R paths differ by 36-84 dB; wavepaths' compat model evaluated on Sionna's "
+                  "block wedge reproduces Sionna's |a| to 0.02 dB, and the exact PEC wedge solution for the true "
+                  "sector equals wavepaths' coefficient to 0.1 dB and lies 30-100 dB below the right-angled "
+                  "wedge's (tests/validation/test_non_manifold_edges.py; docs/sionna-diffraction.md §6).",
+        "who_matches_exact": "wavepaths (the free-space sector of all the faces)",
+    },
+    {
+        "id": "sionna-free-edge-collapses-to-flat",
+        "what": "On some free edges (a screen, or the top edge of a wall whose roof is another object) Sionna's "
+                "diffraction coefficient is zero to float32 precision (|a| 60 to 180 dB below the half-plane's)",
+        "reason": "Sionna RT 2.2's wedge_geometry orients the wedge's two normals by the side on which the other "
+                  "face's centroid lies, with a float32 margin of 6e-6 m; on a free edge the other face is the "
+                  "same triangle (nn = -n0), whose centroid lies in its own plane, so float32 rounding of "
+                  "vertices tens of metres from the origin can flip one normal: n0 = nn, interior angle pi "
+                  "(Sionna's own wedge_geometry returns 180 deg for etoile's element_015 wall top edge, 0 deg for "
+                  "the roof edge beside it), n = 1, and the UTD terms cancel. Sommerfeld's exact half-plane "
+                  "solution is not zero there; wavepaths' coefficient equals it "
+                  "(tests/validation/test_sionna_screen_collapse.py). On etoile_crop 31 matched paths (all on "
+                  "wall tops under a roof of another object, so also 'diffraction-between-objects').",
+        "who_matches_exact": "wavepaths (UTD = Sommerfeld for the half-plane)",
     },
     {
         "id": "sampling-misses",
