@@ -8,6 +8,9 @@ picks the pair of faces that bounds the topological volume a path lives in.
 
 Construction (the "corefinement" the seed assumes, footnote 2):
 
+0. mesh edges are split at the scene vertices lying inside them (T-junctions: a low
+   building against a tall one, their corners on one line), and pieces with the same end
+   vertices are merged, so that each stretch of a line carries exactly the faces around it;
 1. every unique mesh edge gets one face entry per incident triangle, with the seed's
    ``P_f``: the unit vector in the face plane, perpendicular to the edge, pointing
    into the face;
@@ -21,9 +24,9 @@ Construction (the "corefinement" the seed assumes, footnote 2):
    exactly once.
 
 Not handled (documented in docs/scenes.md): objects that interpenetrate (their
-intersection curves are not computed), edges that lie only partly inside another
-polygon, and collinear overlaps of edges of different objects with different end
-points.
+intersection curves are not computed), and edges that lie only partly inside another
+polygon without a vertex at the polygon's border (collinear overlaps are split at the
+vertices of either edge, step 0).
 """
 
 from __future__ import annotations
@@ -70,7 +73,7 @@ class Dihedra:
     diffracting : (d,) bool
         ``max_sector > pi`` (beyond the flat tolerance): the candidates of the path search.
     mesh_edges_ptr, mesh_edges : CSR, int64
-        The scene's mesh edges merged into each dihedron.
+        The mesh edges (after the split at T-junctions, step 0) merged into each dihedron.
     skipped_flat_edges : int
         Mesh edges whose faces are all coplanar (not dihedra).
     """
@@ -177,27 +180,101 @@ def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarra
     return ei[ok], pi[ok]
 
 
+def _split_t_junctions(scene: "Scene"):
+    """The mesh edges, split at the vertices lying inside them (T-junctions), coinciding pieces merged.
+
+    Two objects whose edges run along one line with different end points (a low building
+    against a tall one: their corners share the line up to the low roof) have no common
+    mesh edge: the short edge's top vertex lies *inside* the long edge. Each edge is cut
+    at every scene vertex within the weld tolerance of its interior, and pieces with the
+    same two end vertices become one edge carrying the faces of all of them, so the
+    common stretch gets every face around it (often flat: a facade continuing another)
+    and the rest keeps its own.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        End vertices of each edge, sorted.
+    entry_edge, entry_tri, entry_side : (n,) int64
+        One entry per (edge, incident triangle), grouped by edge: the triangle and the
+        side of it that the (unsplit) mesh edge was; the corner opposite that side is
+        off the edge, so the face direction is computed as for a whole edge.
+    splits : int
+        Vertices found inside edges.
+    """
+    inc = scene.incidence
+    verts = scene.vertices
+    E = inc.edges
+    counts = inc.counts
+    ptr = inc.incidence_ptr
+    entry_edge = np.repeat(np.arange(len(E)), counts)
+    if len(E) == 0:
+        return E, entry_edge, inc.incidence_tri, inc.incidence_side, 0
+    a, b = verts[E[:, 0]], verts[E[:, 1]]
+    tol = scene.length_tolerance(scene.tolerances.weld)
+    length = np.linalg.norm(b - a, axis=1)
+    w = (b - a) / np.where(length > 0, length, 1.0)[:, None]
+    lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
+    vi, ei = _grid_pairs(lo, hi, verts)
+    keep = (vi != E[ei, 0]) & (vi != E[ei, 1])
+    keep &= np.all((verts[vi] >= lo[ei]) & (verts[vi] <= hi[ei]), axis=1)
+    vi, ei = vi[keep], ei[keep]
+    rel = verts[vi] - a[ei]
+    t = np.einsum("ij,ij->i", rel, w[ei])
+    off = np.linalg.norm(rel - t[:, None] * w[ei], axis=1)
+    on = (off <= tol) & (t > tol) & (t < length[ei] - tol)
+    vi, ei, t = vi[on], ei[on], t[on]
+    if len(vi) == 0:
+        return E, entry_edge, inc.incidence_tri, inc.incidence_side, 0
+    o = np.lexsort((t, ei))
+    vi, ei = vi[o], ei[o]
+    split = np.unique(ei)
+    inner = np.bincount(ei, minlength=len(E))[split]  # interior vertices per split edge
+    # node chains: start, interior vertices by t, end; pieces between consecutive nodes
+    n_nodes = inner + 2
+    node_ptr = np.concatenate([[0], np.cumsum(n_nodes)])
+    nodes = np.empty(int(node_ptr[-1]), dtype=np.int64)
+    nodes[node_ptr[:-1]] = E[split, 0]
+    nodes[node_ptr[1:] - 1] = E[split, 1]
+    pos = np.arange(len(vi)) - np.repeat(np.cumsum(inner) - inner, inner)
+    nodes[np.repeat(node_ptr[:-1], inner) + 1 + pos] = vi
+    n_pieces = inner + 1
+    piece_parent = np.repeat(split, n_pieces)
+    first = np.repeat(node_ptr[:-1], n_pieces) + (np.arange(int(n_pieces.sum())) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces))
+    pieces = np.stack([nodes[first], nodes[first + 1]], axis=1)
+    whole = np.setdiff1d(np.arange(len(E)), split)
+    parent = np.concatenate([whole, piece_parent])
+    pairs = np.sort(np.concatenate([E[whole], pieces]), axis=1)
+    edges, new_id = np.unique(pairs, axis=0, return_inverse=True)
+    new_id = new_id.reshape(-1)
+    c = counts[parent]
+    row = np.repeat(np.arange(len(parent)), c)
+    src = np.repeat(ptr[parent], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+    e_edge = new_id[row]
+    order = np.argsort(e_edge, kind="stable")
+    src = src[order]
+    return edges.astype(np.int64), e_edge[order], inc.incidence_tri[src], inc.incidence_side[src], int(len(vi))
+
+
 def build_dihedra(scene: "Scene") -> Dihedra:
     """Build the :class:`Dihedra` of ``scene`` (seed §3.2).
 
     Cost: O(edges) for the incidence, plus O(edges x polygons) bounding-box tests to
     find edges lying inside other polygons (chunked; once per scene).
     """
-    inc = scene.incidence
     verts = scene.vertices
     tris = scene.triangles
-    num_e = len(inc.edges)
-    a = verts[inc.edges[:, 0]]
-    b = verts[inc.edges[:, 1]]
+    edges, entry_edge, entry_tri, entry_side, _ = _split_t_junctions(scene)
+    num_e = len(edges)
+    a = verts[edges[:, 0]]
+    b = verts[edges[:, 1]]
     w = _unit(b - a)
     elen = np.linalg.norm(b - a, axis=1)
     cos_tol = np.cos(scene.tolerances.coplanar_angle)
 
-    # 1. one face entry per incident triangle
-    counts = inc.counts
-    entry_edge = np.repeat(np.arange(num_e), counts)
-    entry_tri = inc.incidence_tri
-    third = verts[tris[entry_tri, (inc.incidence_side + 2) % 3]]
+    # 1. one face entry per incident triangle (edges split at T-junctions first)
+    counts = np.bincount(entry_edge, minlength=num_e)
+    third = verts[tris[entry_tri, (entry_side + 2) % 3]]
     rel = third - a[entry_edge]
     pf = _unit(rel - np.einsum("ij,ij->i", rel, w[entry_edge])[:, None] * w[entry_edge])
     entry_poly = scene.triangle_polygon[entry_tri]
@@ -265,7 +342,7 @@ def build_dihedra(scene: "Scene") -> Dihedra:
     _, set_id = np.unique(poly_key, axis=0, return_inverse=True)
     set_id = set_id.reshape(-1)
     uf = _UnionFind(num_e)
-    vert_edge_v = np.concatenate([inc.edges[kept, 0], inc.edges[kept, 1]])
+    vert_edge_v = np.concatenate([edges[kept, 0], edges[kept, 1]])
     vert_edge_e = np.concatenate([kept, kept])
     o = np.lexsort((vert_edge_e, vert_edge_v))
     vv, ve = vert_edge_v[o], vert_edge_e[o]
@@ -276,8 +353,8 @@ def build_dihedra(scene: "Scene") -> Dihedra:
     # and only when they leave the shared vertex in opposite directions (a needle's two long
     # edges share a vertex and a direction, but are two edges)
     shared = vv[1:][same_v]
-    other_a = np.where(inc.edges[pa, 0] == shared, inc.edges[pa, 1], inc.edges[pa, 0])
-    other_b = np.where(inc.edges[pb, 0] == shared, inc.edges[pb, 1], inc.edges[pb, 0])
+    other_a = np.where(edges[pa, 0] == shared, edges[pa, 1], edges[pa, 0])
+    other_b = np.where(edges[pb, 0] == shared, edges[pb, 1], edges[pb, 0])
     ok &= np.einsum("ij,ij->i", verts[other_a] - verts[shared], verts[other_b] - verts[shared]) < 0
     if ok.any():
         # a vertex where more than two edges of the same set meet is a branching point: do not merge there
