@@ -70,3 +70,24 @@ def test_console_script_has_bench():
     out = subprocess.run([exe, "bench", "--help"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0
     assert "--quick" in out.stdout and "--munich" in out.stdout
+
+
+def test_large_gain_differences_are_counted_by_reason_and_band():
+    """Benchmark 2's agreement sorts matched pairs more than 6 dB apart by known reason; a
+    depth-3 D-R goes to Sionna's known depth dependence, a reflection (no edge to blame) is
+    unexplained, and pairs within 6 dB are not counted."""
+    from types import SimpleNamespace
+
+    from wavepaths.bench.sionna_paths import _large_gain_differences
+    from wavepaths.scene import load_scene
+    from wavepaths.validation.compare import Match
+
+    def match(kinds, diff, i):
+        return Match(0, i, kinds, i, i, 0.0, 0.0, diff, 0.0)
+
+    comp = SimpleNamespace(matches=[match("D-R", 7.5, 0), match("R", 25.0, 1), match("R-R", 9.0, 2),
+                                    match("R", 3.0, 3), match("LOS", float("nan"), 4)])
+    out = _large_gain_differences(load_scene("street_canyon"), None, None, None, comp)
+    assert out["by_reason"] == {"sionna-dr-depends-on-max-depth": {"6-20 dB": 1, "> 20 dB": 0},
+                                "unexplained": {"6-20 dB": 1, "> 20 dB": 1}}
+    assert [e["rx"] for e in out["unexplained_examples"]] == [1, 2]

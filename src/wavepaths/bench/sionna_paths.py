@@ -142,6 +142,7 @@ def _agreement(xml: str, paths, a, sn) -> dict:
     comp = compare_paths(paths, a, sn, explain=lambda side, i: _explain_sionna_only(scene, sn, i, sectors)
                          if side == "sionna" else "")
     s = comp.summary()
+    amplitude = _large_gain_differences(scene, paths, a, sn, comp)
     failures = sum(1 for x in comp.only_sionna if x["reason"] == SIONNA_ONLY_FAILURE)
     only_sn = Counter(x["kinds"] for x in comp.only_sionna)
     only_wp = Counter(x["kinds"] for x in comp.only_wavepaths)
@@ -161,7 +162,47 @@ def _agreement(xml: str, paths, a, sn) -> dict:
         "gain_diff_db": s["gain_diff_db"],
         "vertex_error_m": s["vertex_error_m"],
         "by_kind": s["by_kind"],
+        "large_gain_differences": amplitude,
     }
+
+
+GAIN_BANDS_DB = (6.0, 20.0)
+
+
+def _large_gain_differences(scene, paths, a, sn, comp, max_depth: int = 3) -> dict:
+    """Matched pairs whose |a| differ by more than 6 dB, counted by reason and band (6-20 dB, > 20 dB).
+
+    The reasons are the validation report's known disagreements (``validation/known.py``),
+    each checked against exact solutions in the tests: ``sionna-dr-depends-on-max-depth``
+    (a D-R at depth 3), ``multi-object edge`` and ``non-manifold edge`` (Sionna's wedge is two
+    of the faces wavepaths' dihedron has), ``sionna-free-edge-collapses-to-flat``; anything
+    else is ``unexplained`` (with up to 10 examples).
+    """
+    from ..validation.report import (_matched_wedge_difference, _multi_object_dihedra, _non_manifold_dihedra,
+                                     _sionna_collapsed_free_edge)
+
+    multi, non_manifold = _multi_object_dihedra(scene), _non_manifold_dihedra(scene)
+    counts: dict = {}
+    examples = []
+    for mm in comp.matches:
+        diff = mm.gain_diff_db
+        if not np.isfinite(diff) or abs(diff) <= GAIN_BANDS_DB[0]:
+            continue
+        reason = "unexplained"
+        if mm.kinds == "D-R" and max_depth >= 3:
+            reason = "sionna-dr-depends-on-max-depth"
+        elif "D" in mm.kinds:
+            wedge = _matched_wedge_difference(paths, mm.wp_index, multi, non_manifold)
+            if wedge is not None:
+                reason = wedge
+            elif _sionna_collapsed_free_edge(scene, paths, mm, sn, a):
+                reason = "sionna-free-edge-collapses-to-flat"
+        band = "> 20 dB" if abs(diff) > GAIN_BANDS_DB[1] else "6-20 dB"
+        counts.setdefault(reason, {"6-20 dB": 0, "> 20 dB": 0})[band] += 1
+        if reason == "unexplained" and len(examples) < 10:
+            examples.append({"kinds": mm.kinds, "rx": int(mm.rx), "gain_diff_db": float(diff),
+                             "wavepaths_index": int(mm.wp_index)})
+    return {"by_reason": counts, "unexplained_examples": examples}
 
 
 def run_scene(bench: BenchScene, rounds: int = 3, repeats: int = 3, max_depth: int = 3,
