@@ -13,7 +13,8 @@ A :class:`TxContext` holds, for a set of transmitters:
 * for the transmitters themselves (order 0), the part of each edge a transmitter may see
   (:mod:`wavepaths.search.visibility`): pairs whose whole edge is proven hidden are dropped
   (``*_culled_hidden``), and the window of the others bounds where their diffraction
-  points may fall.
+  points may fall; for images of order >= 1, the part of each edge from which a leg
+  toward the image can cross its last mirror (its aperture window; ``*_culled_aperture``).
 
 The context is all a coverage tile needs besides the scene; it is what a Dask worker
 receives once (see :mod:`wavepaths.coverage`).
