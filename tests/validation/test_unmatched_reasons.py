@@ -15,19 +15,23 @@ from wavepaths.validation.report import SIONNA_ONLY_FAILURE, SIONNA_ONLY_NOT_A_W
 from wavepaths.validation.sionna_runner import SionnaPaths
 
 
-def _sionna_paths(rows: list[tuple[np.ndarray, list[int], list[int]]], depth: int = 1) -> SionnaPaths:
-    """Fake Sionna paths: (vertices (k + 2, 3), interaction kinds, object ids) per row, one tx and one rx."""
+def _sionna_paths(rows: list[tuple], depth: int = 1) -> SionnaPaths:
+    """Fake Sionna paths: (vertices (k + 2, 3), interaction kinds, object ids[, primitive ids]) per
+    row, one tx and one rx."""
     n = len(rows)
     verts = np.full((n, depth + 2, 3), np.nan)
     inter = np.zeros((n, depth), np.int8)
     objs = np.full((n, depth), -1, np.int64)
-    for i, (v, kinds, ob) in enumerate(rows):
+    prims = np.zeros((n, depth), np.int64)
+    for i, (v, kinds, ob, *pr) in enumerate(rows):
         verts[i, : len(v)] = v
         inter[i, : len(kinds)] = kinds
         objs[i, : len(ob)] = ob
-    length = np.array([np.linalg.norm(np.diff(v, axis=0), axis=1).sum() for v, _, _ in rows])
-    return SionnaPaths(np.zeros(n, np.int64), np.zeros(n, np.int64), inter, np.array([len(k) for _, k, _ in rows]),
-                       verts, np.full(n, 1e-6 + 0j), length / 299_792_458.0, objs, np.zeros((n, depth), np.int64),
+        if pr:
+            prims[i, : len(pr[0])] = pr[0]
+    length = np.array([np.linalg.norm(np.diff(r[0], axis=0), axis=1).sum() for r in rows])
+    return SionnaPaths(np.zeros(n, np.int64), np.zeros(n, np.int64), inter, np.array([len(r[1]) for r in rows]),
+                       verts, np.full(n, 1e-6 + 0j), length / 299_792_458.0, objs, prims,
                        ("box", "other_box", "ground"), 3.5e9, depth, 0, 0.0, 0.0, "fake")
 
 
@@ -46,6 +50,7 @@ def test_unmatched_sionna_paths_get_the_reason_that_holds():
         (real, [2], [1]),                                  # the same path on another object's copy of the edge
         (np.stack([tx, foot, rx]), [2], [0]),              # diffraction at the concave foot
         (np.stack([tx, np.array([0.0, -5.0, 7.0]), rx]), [2], [0]),  # a point on no edge
+        (real, [2], [0], [7]),                             # the same path on another wedge of the same mesh
     ]
     sn = _sionna_paths(rows)
     comp = compare_paths(wp, a, sn, explain=lambda side, i: _explain_sionna_only(scene, sn, i) if side == "sionna" else "")
@@ -54,6 +59,9 @@ def test_unmatched_sionna_paths_get_the_reason_that_holds():
     assert reasons[1] == SIONNA_DUPLICATE
     assert reasons[2] == SIONNA_ONLY_NOT_A_WEDGE
     assert reasons[3] == SIONNA_ONLY_FAILURE
+    # two blocks of one mesh on one edge (a non-manifold edge): Sionna diffracts on each block's
+    # wedge, the same path through two primitives of one object
+    assert reasons[4] == SIONNA_DUPLICATE
     # without its matched twin, a duplicate is not excused: both copies are explained on their own
     sn2 = _sionna_paths(rows[1:2] + rows[1:2])
     none = wp.select(np.zeros(len(wp), bool))

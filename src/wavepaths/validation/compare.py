@@ -19,9 +19,9 @@ SPEED_OF_LIGHT = 299_792_458.0
 
 
 DUPLICATE_TOL_M = 1e-2
-SIONNA_DUPLICATE = ("duplicate: Sionna gives this path twice (the edge or face is shared by two objects and it "
-                    "interacts with each object's own copy); its twin is matched. wavepaths has one dihedron with all "
-                    "the faces (seed §3.2)")
+SIONNA_DUPLICATE = ("duplicate: Sionna gives this path twice (the edge or face is shared by two objects, or by two "
+                    "blocks of one mesh, and it interacts with each one's own copy); its twin is matched. wavepaths "
+                    "has one dihedron with all the faces (seed §3.2)")
 
 
 @dataclass
@@ -154,7 +154,8 @@ def compare_paths(
             if j not in used_s:
                 n = int(sn.num_interactions[j])
                 dup = any(np.abs(sn.vertices[j2, : n + 2] - sn.vertices[j, : n + 2]).max() < DUPLICATE_TOL_M
-                          and (sn.objects[j2, :n] != sn.objects[j, :n]).any() for j2 in twins)
+                          and ((sn.objects[j2, :n] != sn.objects[j, :n]).any()
+                               or (sn.primitives[j2, :n] != sn.primitives[j, :n]).any()) for j2 in twins)
                 comp.only_sionna.append({"tx": t, "rx": r, "kinds": k, "index": j,
                                          "length_m": float(sn.tau[j] * SPEED_OF_LIGHT),
                                          "gain_db": float(20 * np.log10(max(abs(sn.a[j]), 1e-300))),
