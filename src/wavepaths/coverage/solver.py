@@ -19,6 +19,8 @@ a receiver at the cell centre.
 
 from __future__ import annotations
 
+import hashlib
+
 import dataclasses
 import os
 import sys
@@ -167,6 +169,27 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     )
 
 
+INSIDE_CACHE_SIZE = 8
+"""Cell masks kept per scene (:func:`_cached`); the oldest goes first."""
+
+
+def _cached(scene: "Scene", key: str, make):
+    """A value cached on the scene object, like its dihedra: the solids, and the inside mask of
+    a set of cell centres (keyed by their bytes), which do not depend on the transmitters or the
+    options, so a second map on the same grid skips the ray-parity test. At most
+    :data:`INSIDE_CACHE_SIZE` masks are kept."""
+    cache = scene.__dict__.setdefault("_coverage_cache", {})
+    if key not in cache:
+        masks = [k for k in cache if k.startswith("inside:")]
+        if key.startswith("inside:") and len(masks) >= INSIDE_CACHE_SIZE:
+            del cache[masks[0]]
+        value = make()
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+        cache[key] = value
+    return cache[key]
+
+
 def coverage(
     scene: Scene,
     tx,
@@ -239,8 +262,9 @@ def coverage(
     timings: dict[str, float] = {}
     t = time.perf_counter()
     if cov.mask_inside:
-        solids = solid_objects(scene)
-        inside = inside_solid_objects(scene, flat, solids)
+        solids = _cached(scene, "solids", lambda: solid_objects(scene))
+        inside = _cached(scene, "inside:" + hashlib.sha1(flat.tobytes()).hexdigest(),
+                         lambda: inside_solid_objects(scene, flat, solids))
         tx_in = inside_solid_objects(scene, tx, solids)
         if tx_in.any():
             i = int(np.nonzero(tx_in)[0][0])
