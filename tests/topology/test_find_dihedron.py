@@ -169,4 +169,3 @@ def test_same_sector_is_find_dihedron_anywhere_on_the_edge(rng):
     np.testing.assert_allclose(phi_e[v], ref.phi_prime[v], atol=1e-12)
     np.testing.assert_allclose(phi_r[v], ref.phi[v], atol=1e-12)
     np.testing.assert_allclose(tab.width[idx[v], se[v]], ref.wedge_angle[v], atol=1e-12)
-
