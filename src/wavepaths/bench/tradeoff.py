@@ -47,11 +47,15 @@ from .scenes import STREET_CANYON_TX, street_canyon_receivers
 
 FREQUENCY_HZ = 3.5e9
 
-# (label, max_reflections, diffraction, diffraction_reflections)
+# (label, max_reflections, diffraction, diffraction_reflections[, lit_region])
+# "shadow": diffracted paths only where the incident field is shadowed (TraceOptions.lit_region
+# False), the cheapest way to light the cells reflections leave dark; UTD's total field is then
+# not continuous across the shadow boundaries, which the error shows.
 WAVEPATHS_SETTINGS = [
     ("R1", 1, False, 0),
     ("R2", 2, False, 0),
     ("R3", 3, False, 0),
+    ("R0+D shadow", 0, True, 0, False),
     ("R0+D", 0, True, 0),
     ("R1+D", 1, True, 0),
     ("R2+D", 2, True, 0),
@@ -59,7 +63,16 @@ WAVEPATHS_SETTINGS = [
     ("R3+D1", 3, True, 1),
     ("R3+D2", 3, True, 2),
 ]
-QUICK_SETTINGS = ("R1", "R2", "R0+D", "R1+D", "R2+D", "R3+D1")
+QUICK_SETTINGS = ("R1", "R2", "R0+D shadow", "R0+D", "R1+D", "R2+D", "R3+D1")
+
+
+def trace_options(setting: tuple):
+    """The :class:`~wavepaths.search.TraceOptions` of one entry of :data:`WAVEPATHS_SETTINGS`."""
+    from ..search import TraceOptions
+
+    _, mr, diff, dr, *lit = setting
+    return TraceOptions(max_reflections=mr, diffraction=diff, diffraction_reflections=dr,
+                        lit_region=lit[0] if lit else True)
 
 
 def map_error(value_db: np.ndarray, reference_db: np.ndarray, valid: np.ndarray) -> dict:
@@ -100,12 +113,10 @@ def wavepaths_map(scene, grid_spec: dict, setting: tuple, sub: int = 1, workers:
 
     from ..coverage import CoverageOptions, PlanarGrid, coverage
     from ..fields import FieldConfig
-    from ..search import TraceOptions
 
-    _, mr, diff, dr = setting
     grid = PlanarGrid(center=grid_spec["center"][:2], height=grid_spec["center"][2], size=grid_spec["size"],
                       cell_size=grid_spec["cell_size"] / sub)
-    opts = TraceOptions(max_reflections=mr, diffraction=diff, diffraction_reflections=dr)
+    opts = trace_options(setting)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # nanmean of all-NaN blocks (cells inside buildings)
@@ -218,7 +229,7 @@ def run_path_tradeoff(quick: bool = False, n_rx: int = 100, progress=print) -> d
     """The path-query half of benchmark 3 (street canyon, 100 receivers)."""
     from ..fields import FieldConfig, compute_fields
     from ..scene import load_scene
-    from ..search import TraceOptions, trace
+    from ..search import trace
     from ..validation.sionna_env import sionna_version
     from .scenes import sionna_scene_xml
 
@@ -229,8 +240,7 @@ def run_path_tradeoff(quick: bool = False, n_rx: int = 100, progress=print) -> d
     valid = np.ones(n_rx, bool)
 
     def query(setting):
-        _, mr, diff, dr = setting
-        opts = TraceOptions(max_reflections=mr, diffraction=diff, diffraction_reflections=dr)
+        opts = trace_options(setting)
         t0 = time.perf_counter()
         p = trace(scene, STREET_CANYON_TX, rx, opts)
         f = compute_fields(scene, p, cfg)
