@@ -3,11 +3,12 @@
 The knobs that trade speed for accuracy:
 
 * wavepaths: the reflection order, whether diffraction is traced and with how many
-  reflections, and, for maps, how many receivers per cell (``s x s`` sub-cells averaged,
-  since Sionna's map is a cell average). wavepaths has no pruning tolerance (its pruning
-  is exact: a pruned image can carry no path) and computes in float64 only (Embree
-  casts in float32 with float64 re-casts near boundaries), so those two knobs do not
-  exist.
+  reflections, diffraction in the incident shadow only (``lit_region=False``), the
+  pruning tolerance ``prune_db`` (reflected paths that a stated bound puts that far below
+  free space are dropped; :class:`~wavepaths.search.TraceOptions`) and, for maps, how many
+  receivers per cell (``s x s`` sub-cells averaged, since Sionna's map is a cell
+  average). wavepaths computes in float64 only (Embree casts in float32 with float64
+  re-casts near boundaries), so a float32 knob does not exist.
 * Sionna RT: ``samples_per_tx`` (maps) and ``samples_per_src`` (paths), the number of
   rays it shoots; it computes in float32 only.
 
@@ -47,32 +48,35 @@ from .scenes import STREET_CANYON_TX, street_canyon_receivers
 
 FREQUENCY_HZ = 3.5e9
 
-# (label, max_reflections, diffraction, diffraction_reflections[, lit_region])
-# "shadow": diffracted paths only where the incident field is shadowed (TraceOptions.lit_region
-# False), the cheapest way to light the cells reflections leave dark; UTD's total field is then
-# not continuous across the shadow boundaries, which the error shows.
+# (label, max_reflections, diffraction, diffraction_reflections[, other TraceOptions fields])
+# "shadow": diffracted paths only where the incident field is shadowed (lit_region=False), the
+# cheapest way to light the cells reflections leave dark; UTD's total field is then not
+# continuous across the shadow boundaries, which the error shows. "prune x dB": reflected
+# paths a stated bound puts x dB below free space are dropped (prune_db).
 WAVEPATHS_SETTINGS = [
     ("R1", 1, False, 0),
     ("R2", 2, False, 0),
     ("R3", 3, False, 0),
-    ("R0+D shadow", 0, True, 0, False),
+    ("R3 prune 20 dB", 3, False, 0, {"prune_db": 20.0}),
+    ("R0+D shadow", 0, True, 0, {"lit_region": False}),
     ("R0+D", 0, True, 0),
     ("R1+D", 1, True, 0),
     ("R2+D", 2, True, 0),
     ("R2+D1", 2, True, 1),
     ("R3+D1", 3, True, 1),
+    ("R3+D2 prune 10 dB", 3, True, 2, {"prune_db": 10.0}),
+    ("R3+D2 prune 20 dB", 3, True, 2, {"prune_db": 20.0}),
     ("R3+D2", 3, True, 2),
 ]
-QUICK_SETTINGS = ("R1", "R2", "R0+D shadow", "R0+D", "R1+D", "R2+D", "R3+D1")
+QUICK_SETTINGS = ("R1", "R2", "R0+D shadow", "R0+D", "R1+D", "R2+D", "R3+D1", "R3+D2 prune 20 dB")
 
 
 def trace_options(setting: tuple):
     """The :class:`~wavepaths.search.TraceOptions` of one entry of :data:`WAVEPATHS_SETTINGS`."""
     from ..search import TraceOptions
 
-    _, mr, diff, dr, *lit = setting
-    return TraceOptions(max_reflections=mr, diffraction=diff, diffraction_reflections=dr,
-                        lit_region=lit[0] if lit else True)
+    _, mr, diff, dr, *other = setting
+    return TraceOptions(max_reflections=mr, diffraction=diff, diffraction_reflections=dr, **(other[0] if other else {}))
 
 
 def map_error(value_db: np.ndarray, reference_db: np.ndarray, valid: np.ndarray) -> dict:
