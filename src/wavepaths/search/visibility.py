@@ -107,6 +107,24 @@ class VisibilityWindows:
                 | (self.open1[rows] & (t >= L - tau)))
 
 
+def _side_planes(c: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (k, 3, 3) of the planes through ``S`` (k, 3) and each side ``i`` (corners
+    ``i``, ``i + 1``) of the triangles ``c`` (k, 3, 3), oriented toward the third corner, all
+    recentred alike; and (k,) bool: every plane is defined (``S`` not on a side's line nor in
+    the triangle's plane)."""
+    sides = np.empty_like(c)
+    valid = np.ones(len(c), dtype=bool)
+    for i in range(3):
+        ci, cj, ck = c[:, i] - S, c[:, (i + 1) % 3] - S, c[:, (i + 2) % 3] - S
+        m = np.cross(ci, cj)
+        norm = np.linalg.norm(m, axis=1)
+        m = m / np.where(norm > 0, norm, 1.0)[:, None]
+        orient = np.sign(np.einsum("ij,ij->i", m, ck))
+        valid &= (norm > 0) & (orient != 0)
+        sides[:, i] = orient[:, None] * m
+    return sides, valid
+
+
 def shadow_intervals(exact: "ExactSegments", S: np.ndarray, tri: np.ndarray, A: np.ndarray, w: np.ndarray,
                      L: np.ndarray, mode: str = "proven") -> tuple[np.ndarray, np.ndarray]:
     """Edge parameters ``t`` whose segment from ``S`` passes through triangle ``tri``.
@@ -172,16 +190,11 @@ edge) shadows nothing.
         raise ValueError(f"unknown mode {mode!r}")
     alphas = [-sigma * (np.einsum("ij,ij->i", n, A) - off) - 2 * tol]
     betas = [-sigma * np.einsum("ij,ij->i", n, w)]
+    sides, ok = _side_planes(c, S)
+    valid &= ok
     for i in range(3):
-        ci, cj, ck = c[:, i] - S, c[:, (i + 1) % 3] - S, c[:, (i + 2) % 3] - S
-        m = np.cross(ci, cj)
-        norm = np.linalg.norm(m, axis=1)
-        valid &= norm > 0
-        m = m / np.where(norm > 0, norm, 1.0)[:, None]
-        orient = np.sign(np.einsum("ij,ij->i", m, ck))
-        valid &= orient != 0
-        alphas.append(orient * np.einsum("ij,ij->i", m, A - S) - eps * dmax)
-        betas.append(orient * np.einsum("ij,ij->i", m, w))
+        alphas.append(np.einsum("ij,ij->i", sides[:, i], A - S) - eps * dmax)
+        betas.append(np.einsum("ij,ij->i", sides[:, i], w))
     alpha, beta = np.stack(alphas, axis=1), np.stack(betas, axis=1)  # alpha + beta t >= 0
     with np.errstate(divide="ignore", invalid="ignore"):
         root = -alpha / beta
@@ -332,16 +345,10 @@ def aperture_planes(scene: "Scene", I: np.ndarray, q: np.ndarray) -> AperturePla
     O = np.empty((len(rows), 4))
     N[:, 0] = -sigma[:, None] * n
     O[:, 0] = sigma * off + tol
-    for i in range(3):
-        ci, cj, ck = c[:, i] - S, c[:, (i + 1) % 3] - S, c[:, (i + 2) % 3] - S
-        m = np.cross(ci, cj)
-        norm = np.linalg.norm(m, axis=1)
-        valid &= norm > 0
-        m = m / np.where(norm > 0, norm, 1.0)[:, None]
-        orient = np.sign(np.einsum("ij,ij->i", m, ck))
-        valid &= orient != 0
-        N[:, i + 1] = orient[:, None] * m
-        O[:, i + 1] = -np.einsum("ij,ij->i", N[:, i + 1], S)
+    sides, ok = _side_planes(c, S)
+    valid &= ok
+    N[:, 1:] = sides
+    O[:, 1:] = -np.einsum("kij,kj->ki", sides, S)
     with np.errstate(divide="ignore", invalid="ignore"):
         eps = -1e-7 * (1 + exact.diagonal / np.abs(s_s))
     return AperturePlanes(ptr, N, O, np.where(valid, eps, 0.0), valid, whole, I - c0, c0)
