@@ -7,16 +7,6 @@ import numpy as np
 import pytest
 
 
-def _prism(poly, h):
-    m = len(poly)
-    v = [[x, y, 0.0] for x, y in poly] + [[x, y, h] for x, y in poly]
-    t = [[0, i + 1, i] for i in range(1, m - 1)] + [[m, m + i, m + i + 1] for i in range(1, m - 1)]
-    for i in range(m):
-        j = (i + 1) % m
-        t += [[i, j, m + j], [i, m + j, m + i]]
-    return v, t
-
-
 def test_t_junction_splits_a_corner_into_the_shared_flat_stretch_and_the_free_corner():
     """A low block (10 m) against a tall one (20 m), facades continuing each other: the line
     x = y = 0 is a flat facade up to 10 m (four faces, no diffraction) and the tall block's
@@ -29,8 +19,8 @@ def test_t_junction_splits_a_corner_into_the_shared_flat_stretch_and_the_free_co
     from wavepaths.search import TraceOptions, trace
 
     b = SceneBuilder()
-    b.add_mesh("tall", PEC, *_prism([(0, 0), (10, 0), (10, 10), (0, 10)], 20.0))
-    b.add_mesh("low", PEC, *_prism([(-10, 0), (0, 0), (0, 10), (-10, 10)], 10.0))
+    b.add_prism("tall", PEC, [(0, 0), (10, 0), (10, 10), (0, 10)], 20.0)
+    b.add_prism("low", PEC, [(-10, 0), (0, 0), (0, 10), (-10, 10)], 10.0)
     scene = build_scene(*b.arrays())
     dh = scene.dihedra
     on = np.nonzero((np.linalg.norm(dh.origin[:, :2], axis=1) < 1e-9) & (np.abs(dh.direction[:, 2]) > 0.999))[0]

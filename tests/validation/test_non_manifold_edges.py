@@ -38,24 +38,13 @@ TX = np.array([[30.0, -20.0, 5.0]])
 RX = np.array([[-25.0, -15.0, 5.0], [-40.0, -5.0, 5.0], [-15.0, -30.0, 5.0]])  # all in front of the facades
 
 
-def _prism(poly, height):
-    """Closed prism over a counter-clockwise polygon, outward normals."""
-    m = len(poly)
-    v = [[x, y, 0.0] for x, y in poly] + [[x, y, height] for x, y in poly]
-    t = [[0, i + 1, i] for i in range(1, m - 1)] + [[m, m + i, m + i + 1] for i in range(1, m - 1)]
-    for i in range(m):
-        j = (i + 1) % m
-        t += [[i, j, m + j], [i, m + j, m + i]]
-    return v, t
-
-
 def _party_wall_scene(path: str):
     """Blocks A (x < 0) and B (x > 0) of one object 'blocks', sharing the wall x = 0; the corner
     edge is the z axis, B's facade turns 0.1 degrees away from A's (a convex kink)."""
     b = SceneBuilder()
     metal = itu_material("metal")
-    b.add_mesh("blocks", metal, *_prism([(-10, 0), (0, 0), (0, 10), (-10, 10)], 10.0))
-    b.add_mesh("blocks", metal, *_prism([(0, 0), (10, 10 * np.tan(KINK)), (10, 10), (0, 10)], 10.0))
+    b.add_prism("blocks", metal, [(-10, 0), (0, 0), (0, 10), (-10, 10)], 10.0)
+    b.add_prism("blocks", metal, [(0, 0), (10, 10 * np.tan(KINK)), (10, 10), (0, 10)], 10.0)
     write_mitsuba_xml(build_scene(*b.arrays(), source="party wall"), path)
     return load_scene(path)
 

@@ -75,6 +75,17 @@ class SceneBuilder:
                 tris += [[p0, p1, p2], [p0, p2, p3]]
         self.add_mesh(obj, material, verts, tris)
 
+    def add_prism(self, obj: str, material: Material, polygon, height: float) -> None:
+        """A closed vertical prism from ``z = 0`` to ``height`` over a counter-clockwise convex
+        ``polygon`` [(x, y), ...] (fan-triangulated floor and roof, outward normals)."""
+        m = len(polygon)
+        v = [[x, y, 0.0] for x, y in polygon] + [[x, y, height] for x, y in polygon]
+        t = [[0, i + 1, i] for i in range(1, m - 1)] + [[m, m + i, m + i + 1] for i in range(1, m - 1)]
+        for i in range(m):
+            j = (i + 1) % m
+            t += [[i, j, m + j], [i, m + j, m + i]]
+        self.add_mesh(obj, material, v, t)
+
     def add_box(self, obj: str, material: Material, lo, hi, bottom: bool = True) -> None:
         """An axis-aligned box; ``bottom=False`` leaves its floor open."""
         (x0, y0, z0), (x1, y1, z1) = lo, hi
