@@ -73,6 +73,10 @@ class TraceOptions:
         Conservative culling tests to switch off, for measuring what each one saves
         (``wavepaths bench``'s skip benchmark); every name in :data:`CULLING_TESTS`. They
         never change the paths found, only the time taken: the benchmark checks that.
+    compiled : bool
+        Run the densest culling loops as compiled kernels when numba is installed (the
+        ``fast`` extra; :mod:`wavepaths.search.kernels`); ``False`` runs the numpy
+        reference. Both find the same paths.
     """
 
     los: bool = True
@@ -84,6 +88,7 @@ class TraceOptions:
     rx_batch: int = 256
     prune_db: float | None = None
     disable_culling: frozenset = frozenset()
+    compiled: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "disable_culling", frozenset(self.disable_culling))

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..topology.sectors import sector_lookup
+from . import kernels
 from .beams import reflection_candidates
 from .context import TxContext
 from .geometry import diffraction_point_reduced
@@ -360,6 +361,8 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
       diffraction point lies on the edge;
     * the sector: not on a face, and wider than pi.
     """
+    if ctx.options.compiled and kernels.available():
+        return _receiver_side_compiled(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
     dihedra = scene.dihedra
     c0 = scene.center
     I = rx_lv.last[e_rows] - c0  # (E, 3)
@@ -404,6 +407,47 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     # relative to a small distance to the edge line: an end point almost on it)
     ie, idd = np.nonzero(ok)
     return _kept_pairs_end_side(scene, ctx, rx_lv, e_rows[ie], diffr[idd], window, stats, tag)
+
+
+def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray,
+                            diffr: np.ndarray, stats: Counter, tag: str, window=None) -> _EndSide:
+    """:func:`_receiver_side` with the mirror-side, beam and Keller-window tests fused per pair
+    (:func:`wavepaths.search.kernels.receiver_pairs`, numba); the same tests and margins, then
+    the sector per surviving pair, as the numpy reference does."""
+    dihedra = scene.dihedra
+    c0 = scene.center
+    R = rx_lv.last[e_rows]
+    I = R - c0
+    A = dihedra.origin[diffr] - c0
+    w = dihedra.direction[diffr]
+    L = dihedra.length[diffr]
+    B = A + L[:, None] * w
+    disabled = ctx.options.disable_culling
+    mirror = beam = None
+    if rx_lv.order >= 1:
+        q = rx_lv.polygons[e_rows, -1]
+        if "receiver_mirror_side" not in disabled:
+            n, off = scene.polygon_normal[q], scene.polygon_offset[q] - scene.polygon_normal[q] @ c0
+            side = np.sign(np.einsum("ij,ij->i", rx_lv.images[e_rows, -2] - c0, n) - off)
+            mirror = (n, off, side, scene.length_tolerance(scene.tolerances.plane_distance))
+        if "receiver_beam" not in disabled:
+            centre, radius = scene.polygon_spheres
+            to_q = centre[q] - c0 - I
+            beam = (to_q, np.linalg.norm(to_q, axis=1), radius[q], A + 0.5 * L[:, None] * w, 0.5 * L)
+    frame = (dihedra.origin[diffr], w, ctx.sectors.x_hat[diffr], ctx.sectors.y_hat[diffr])
+    win = None
+    if window is not None:
+        v_lo, lo, v_hi, hi = window
+        win = (v_lo[diffr], lo[diffr], v_hi[diffr], hi[diffr], scene.length_tolerance(1e-9))
+    ok, n_mirror, n_beam, n_window = kernels.receiver_pairs(I, mirror, A, B, beam, R, frame, win)
+    if mirror is not None:
+        stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += n_mirror
+    if beam is not None:
+        stats[f"{tag}_receiver_pairs_rejected_beam"] += n_beam
+    if win is not None:
+        stats[f"{tag}_receiver_pairs_rejected_keller_window"] += n_window
+    ie, idd = np.nonzero(ok)
+    return _kept_pairs_end_side(scene, ctx, rx_lv, e_rows[ie], diffr[idd], None, stats, tag)
 
 
 def _edge_frame(scene: "Scene", ctx: TxContext, points: np.ndarray, d: np.ndarray):

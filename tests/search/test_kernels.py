@@ -1,0 +1,79 @@
+"""The compiled kernels (numba, optional) against the numpy reference they replace."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+import pytest
+
+import wavepaths.search.tile as tile
+from wavepaths.scene import load_scene
+from wavepaths.search import TraceOptions, kernels, trace
+from wavepaths.search.context import build_tx_context
+from wavepaths.search.images import build_image_levels
+
+from .helpers import path_keys
+
+needs_numba = pytest.mark.skipif(not kernels.available(), reason="numba is not installed (the `fast` extra)")
+
+TX = np.array([[-60.0, 0.0, 10.0]])
+
+
+def _receivers(rng, n: int) -> np.ndarray:
+    street = rng.uniform(size=n) < 0.5
+    y = np.where(street, rng.uniform(-9, 9, n), np.sign(rng.uniform(-1, 1, n)) * rng.uniform(27, 39, n))
+    return np.column_stack([rng.uniform(-95, 95, n), y, np.full(n, 1.5)])
+
+
+@needs_numba
+@pytest.mark.parametrize("disabled", [frozenset(), frozenset({"receiver_beam"}), frozenset({"receiver_mirror_side"}),
+                                      frozenset({"keller_window"})])
+def test_compiled_receiver_side_keeps_the_same_pairs_as_numpy(disabled, rng):
+    """Per (receiver image, dihedron) pair, at orders 0, 1 and 2: the same survivors in the
+    same order, the same sector and angle, and the same rejection counts per test."""
+    scene = load_scene("street_canyon")
+    rx = _receivers(rng, 25)
+    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, disable_culling=disabled)
+    ctx = build_tx_context(scene, TX, opts.with_(compiled=False))  # _receiver_side: the numpy reference
+    levels = build_image_levels(scene, rx, 2, opts.skip_absorbers)
+    diffr = ctx.diffracting
+    tside = tile._transmitter_side(scene, ctx, ctx.levels[0], ctx.diffraction_sources[0])
+    window = None if "keller_window" in disabled else tile._keller_window(scene, tside)
+    for b in (0, 1, 2):
+        rows = np.arange(len(levels[b]))
+        s_np, s_nb = Counter(), Counter()
+        ref = tile._receiver_side(scene, ctx, levels[b], rows, diffr, s_np, "t", window)
+        got = tile._receiver_side_compiled(scene, ctx, levels[b], rows, diffr, s_nb, "t", window)
+        assert len(ref.row) > 0
+        np.testing.assert_array_equal(got.row, ref.row)
+        np.testing.assert_array_equal(got.dihedron, ref.dihedron)
+        np.testing.assert_array_equal(got.sector, ref.sector)
+        np.testing.assert_allclose(got.phi, ref.phi, rtol=0, atol=1e-12)
+        assert s_nb == s_np
+        if b >= 1 and not disabled:
+            assert s_np["t_receiver_pairs_rejected_beam"] > 0 and s_np["t_receiver_pairs_rejected_mirror_side"] > 0
+
+
+@needs_numba
+def test_compiled_and_numpy_traces_find_the_same_paths(rng):
+    scene = load_scene("street_canyon")
+    rx = _receivers(rng, 40)
+    opts = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2, rx_batch=16)
+    fast = trace(scene, TX, rx, opts)
+    ref = trace(scene, TX, rx, opts.with_(compiled=False))
+    assert len(fast) > 100
+    assert path_keys(fast) == path_keys(ref)
+    assert fast.stats == ref.stats
+
+
+def test_without_numba_the_numpy_reference_runs(monkeypatch, rng):
+    """No numba (or ``compiled=False``): the search falls back and finds the same paths."""
+    scene = load_scene("street_canyon")
+    rx = _receivers(rng, 20)
+    opts = TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=1)
+    called = []
+    monkeypatch.setattr(tile, "_receiver_side_compiled", lambda *a, **k: called.append(1))
+    monkeypatch.setattr(kernels, "available", lambda: False)
+    ref = trace(scene, TX, rx, opts)
+    assert not called and len(ref) > 0
