@@ -31,7 +31,9 @@ def _receivers(rng, n: int) -> np.ndarray:
                                       frozenset({"keller_window"})])
 def test_compiled_receiver_side_keeps_the_same_pairs_as_numpy(disabled, rng):
     """Per (receiver image, dihedron) pair, at orders 0, 1 and 2: the same survivors in the
-    same order, the same sector and angle, and the same rejection counts per test."""
+    same order, the same sector and angle, and the same rejection counts per test (the
+    kernel's extra aperture test off: numpy has none)."""
+    disabled = disabled | {"receiver_aperture"}
     scene = load_scene("street_canyon")
     rx = _receivers(rng, 25)
     opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, disable_culling=disabled)
@@ -51,7 +53,7 @@ def test_compiled_receiver_side_keeps_the_same_pairs_as_numpy(disabled, rng):
         np.testing.assert_array_equal(got.sector, ref.sector)
         np.testing.assert_allclose(got.phi, ref.phi, rtol=0, atol=1e-12)
         assert s_nb == s_np
-        if b >= 1 and not disabled:
+        if b >= 1 and disabled == {"receiver_aperture"}:
             assert s_np["t_receiver_pairs_rejected_beam"] > 0 and s_np["t_receiver_pairs_rejected_mirror_side"] > 0
 
 
@@ -64,7 +66,28 @@ def test_compiled_and_numpy_traces_find_the_same_paths(rng):
     ref = trace(scene, TX, rx, opts.with_(compiled=False))
     assert len(fast) > 100
     assert path_keys(fast) == path_keys(ref)
-    assert fast.stats == ref.stats
+    # the aperture test rejects pairs the numpy reference sends on to the back-trace
+    aperture = sum(v for k, v in fast.stats.items() if k.endswith("receiver_pairs_rejected_aperture"))
+    assert aperture > 0
+    assert sum(v for k, v in fast.stats.items() if k.endswith("_candidates") and k.startswith("diffraction")) < sum(
+        v for k, v in ref.stats.items() if k.endswith("_candidates") and k.startswith("diffraction"))
+
+
+@needs_numba
+def test_aperture_test_keeps_every_pair_that_yields_a_path(rng):
+    """Every diffracted path's (receiver image, dihedron) pair passes the aperture test: with
+    the test on and off (all else equal, compiled) the same paths, and with it on the same
+    counts as numpy for the tests before it."""
+    scene = load_scene("street_canyon")
+    rx = _receivers(rng, 60)
+    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=3, rx_batch=16)
+    on = trace(scene, TX, rx, opts)
+    off = trace(scene, TX, rx, opts.with_(disable_culling={"receiver_aperture"}))
+    assert sum(v for k, v in on.stats.items() if k.endswith("receiver_pairs_rejected_aperture")) > 0
+    assert len(on) > 0 and path_keys(on) == path_keys(off)
+    for k in off.stats:
+        if "mirror_side" in k or "rejected_beam" in k:
+            assert on.stats[k] == off.stats[k]
 
 
 def test_without_numba_the_numpy_reference_runs(monkeypatch, rng):

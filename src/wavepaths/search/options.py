@@ -11,6 +11,8 @@ CULLING_TESTS: dict[str, str] = {
     "keller_cone": "per receiver chunk, (source, dihedron) pairs whose Keller cones miss the chunk's sphere",
     "receiver_mirror_side": "(receiver image, dihedron) pairs whose edge lies behind the image's last mirror",
     "receiver_beam": "(receiver image, dihedron) pairs whose edge lies outside the image's beam",
+    "receiver_aperture": "(receiver image, dihedron) pairs whose edge lies outside the beams through the image's "
+                         "mirrors' rectangles (compiled kernels only)",
     "keller_window": "(receiver image, dihedron) pairs whose diffraction point falls off the edge for every source",
     "reflection_beam": "(receiver, image chain) pairs whose receiver no beam of the chain can reach",
     "source_beam": "(transmitter image, dihedron) pairs whose edge lies outside the image's beam",
@@ -25,6 +27,7 @@ CULLING_COUNTERS: dict[str, str] = {
     "keller_cone": r"diffraction_\dr_\dr_source_pairs_culled_keller_cone",
     "receiver_mirror_side": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_side",
     "receiver_beam": r"diffraction_\dr_\dr_receiver_pairs_rejected_beam",
+    "receiver_aperture": r"diffraction_\dr_\dr_receiver_pairs_rejected_aperture",
     "keller_window": r"diffraction_\dr_\dr_receiver_pairs_rejected_keller_window",
     "reflection_beam": r"reflection_order_\d_culled_beam",
     "source_beam": r"diffraction_sources_order_\d_culled_beam",

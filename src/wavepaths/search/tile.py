@@ -17,7 +17,7 @@ import numpy as np
 
 from ..topology.sectors import sector_lookup
 from . import kernels
-from .beams import reflection_candidates
+from .beams import chain_apertures, quad_side_planes, reflection_candidates
 from .context import TxContext
 from .geometry import diffraction_point_reduced
 from .images import ImageLevel, backtrace, build_image_levels
@@ -413,7 +413,14 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
                             diffr: np.ndarray, stats: Counter, tag: str, window=None) -> _EndSide:
     """:func:`_receiver_side` with the mirror-side, beam and Keller-window tests fused per pair
     (:func:`wavepaths.search.kernels.receiver_pairs`, numba); the same tests and margins, then
-    the sector per surviving pair, as the numpy reference does."""
+    the sector per surviving pair, as the numpy reference does.
+
+    One test more, after the beam (``receiver_aperture``): the edge must meet the beams
+    from the image through its mirrors' rectangles (the test of
+    :func:`~wavepaths.search.beams.chain_beams_meet`, which the tree-based receiver side
+    applies too). In numpy it would cost four plane tests per pair and mirror over every
+    pair; fused, it costs the planes a pair needs before it fails one.
+    """
     dihedra = scene.dihedra
     c0 = scene.center
     R = rx_lv.last[e_rows]
@@ -423,7 +430,7 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
     L = dihedra.length[diffr]
     B = A + L[:, None] * w
     disabled = ctx.options.disable_culling
-    mirror = beam = None
+    mirror = beam = aperture = None
     if rx_lv.order >= 1:
         q = rx_lv.polygons[e_rows, -1]
         if "receiver_mirror_side" not in disabled:
@@ -434,16 +441,22 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
             centre, radius = scene.polygon_spheres
             to_q = centre[q] - c0 - I
             beam = (to_q, np.linalg.norm(to_q, axis=1), radius[q], A + 0.5 * L[:, None] * w, 0.5 * L)
+        if "receiver_aperture" not in disabled and ctx.apertures is not None:
+            _, _, qd = chain_apertures(scene, rx_lv, e_rows, quads=ctx.apertures.quads)
+            planes = np.concatenate([quad_side_planes(rx_lv.last[e_rows], qd[:, j]) for j in range(rx_lv.order)], axis=1)
+            aperture = (planes, scene.length_tolerance(1e-9))
     frame = (dihedra.origin[diffr], w, ctx.sectors.x_hat[diffr], ctx.sectors.y_hat[diffr])
     win = None
     if window is not None:
         v_lo, lo, v_hi, hi = window
         win = (v_lo[diffr], lo[diffr], v_hi[diffr], hi[diffr], scene.length_tolerance(1e-9))
-    ok, n_mirror, n_beam, n_window = kernels.receiver_pairs(I, mirror, A, B, beam, R, frame, win)
+    ok, n_mirror, n_beam, n_aperture, n_window = kernels.receiver_pairs(I, mirror, A, B, beam, aperture, R, frame, win)
     if mirror is not None:
         stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += n_mirror
     if beam is not None:
         stats[f"{tag}_receiver_pairs_rejected_beam"] += n_beam
+    if aperture is not None:
+        stats[f"{tag}_receiver_pairs_rejected_aperture"] += n_aperture
     if win is not None:
         stats[f"{tag}_receiver_pairs_rejected_keller_window"] += n_window
     ie, idd = np.nonzero(ok)
@@ -516,7 +529,10 @@ def diffraction_tile(
         return out
     src_all = ctx.diffraction_sources[a]
     m = int(ctx.sectors.angles.shape[1])
-    step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * (m + 4)))
+    # receiver images per chunk: the numpy receiver side holds about m + 4 (images x dihedra)
+    # temporaries, the compiled one a single boolean mask (but the survivors still ~ m + 4 arrays)
+    per_pair = 1 if (ctx.options.compiled and kernels.available()) else m + 4
+    step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
     for s in range(0, len(rx_lv), step):
         e_rows = np.arange(s, min(len(rx_lv), s + step))
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
