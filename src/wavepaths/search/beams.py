@@ -492,10 +492,15 @@ class ChainBeams:
         Items are chain rows of the level; item spheres have radius 0.
     through : list of SphereTree
         One per aperture ``j = 0 .. k - 1`` (``k - 1``: the last mirror itself).
+    centre : (m, k, 3) float64, radius : (m, k) float64
+        Per chain (level row), its apertures' spheres (:func:`chain_apertures`) [m], kept
+        for the per-pair tests of :func:`beams_reaching`.
     """
 
     apex: SphereTree
     through: list[SphereTree]
+    centre: np.ndarray
+    radius: np.ndarray
 
 
 def build_chain_beams(
@@ -514,7 +519,7 @@ def build_chain_beams(
     apex = build_sphere_tree(level.last, np.zeros(m), ids, order=order)
     # one node structure: the aperture trees share the apex tree's item array
     through = [replace(build_sphere_tree(cen[:, j], rad[:, j], ids, order=order), items=apex.items) for j in range(k)]
-    return ChainBeams(apex, through)
+    return ChainBeams(apex, through, cen, rad)
 
 
 def beams_reaching(
@@ -580,7 +585,7 @@ def beams_reaching(
         far = 1e-9 * np.linalg.norm(centre[r] - apex, axis=1) + eps
         i = np.nonzero(side * (np.einsum("ij,ij->i", centre[r], n[q]) - d[q]) < radius[r] + far)[0]
         r, c, apex = r[i], c[i], apex[i]
-        cen, rad, _ = chain_apertures(scene, level, c, apertures.centre, apertures.radius)
+        cen, rad = beams.centre[c], beams.radius[c]
         for j in range(level.order - 1, -1, -1):
             i = np.nonzero(beam_meets_spheres(apex, cen[:, j], rad[:, j], centre[r], radius[r]))[0]
             r, c, apex, cen, rad = r[i], c[i], apex[i], cen[i], rad[i]
