@@ -100,3 +100,49 @@ def test_without_numba_the_numpy_reference_runs(monkeypatch, rng):
     monkeypatch.setattr(kernels, "available", lambda: False)
     ref = trace(scene, TX, rx, opts)
     assert not called and len(ref) > 0
+
+
+@needs_numba
+def test_compiled_chain_side_planes_equal_the_numpy_composition(rng):
+    """The kernel's side planes equal beams.chain_apertures then beams.quad_side_planes (1e-12)."""
+    from wavepaths.search.beams import chain_apertures, quad_side_planes, scene_apertures
+
+    scene = load_scene("street_canyon")
+    rx = _receivers(rng, 6)
+    levels = build_image_levels(scene, rx, 3, True)
+    quads = scene_apertures(scene).quads
+    for k in (1, 2, 3):
+        lv = levels[k]
+        rows = np.arange(len(lv))
+        assert len(rows) > 10
+        _, _, qd = chain_apertures(scene, lv, rows, quads=quads)
+        ref = np.concatenate([quad_side_planes(lv.last[rows], qd[:, j]) for j in range(k)], axis=1)
+        got = kernels.chain_side_planes(lv.last[rows], lv.polygons[rows], quads, scene.polygon_normal,
+                                        scene.polygon_offset)
+        assert got.shape == (len(rows), 4 * k, 3)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+
+
+@needs_numba
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng):
+    """beams.reflection_candidates: the same (receiver, chain) pairs and the same culled count,
+    compiled (one descent per cluster) or numpy (blocks of (cluster, node) pairs)."""
+    from wavepaths.search.beams import reflection_candidates
+
+    scene = load_scene("street_canyon")
+    rx = np.concatenate([_receivers(rng, 150), rng.uniform([-90, -8, 1], [90, 8, 30], size=(50, 3))])
+    opts = TraceOptions(max_reflections=3, diffraction=False)
+    pairs, culled = {}, {}
+    for compiled in (True, False):
+        ctx = build_tx_context(scene, TX, opts.with_(compiled=compiled))
+        stats = Counter()
+        got = list(reflection_candidates(scene, ctx, order, rx, stats, 1 << 12))
+        r = np.concatenate([g[0] for g in got])
+        c = np.concatenate([g[1] for g in got])
+        pairs[compiled] = set(zip(r.tolist(), c.tolist()))
+        assert len(pairs[compiled]) == len(r)  # each pair once
+        culled[compiled] = stats[f"reflection_order_{order}_culled_beam"]
+    assert len(pairs[True]) > 100 and culled[True] > 0
+    assert pairs[True] == pairs[False]
+    assert culled[True] == culled[False]

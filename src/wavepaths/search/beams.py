@@ -33,10 +33,12 @@ scene diagonal and of the distance on planes), so none drops a valid path.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
+
+from . import kernels
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -501,6 +503,7 @@ class ChainBeams:
     through: list[SphereTree]
     centre: np.ndarray
     radius: np.ndarray
+    flat: dict = field(default_factory=dict, compare=False, repr=False)  # the compiled query's flat arrays, built once
 
 
 def build_chain_beams(
@@ -638,6 +641,7 @@ def point_clusters(
 
 
 RX_CLUSTER = 8  # receivers per cluster in the reflection beam culling
+COMPILED_CLUSTERS = 256  # clusters per call of the compiled query
 POINT_TEST = True  # also test each receiver of a cluster (as a point) before back-tracing
 
 
@@ -670,6 +674,16 @@ def reflection_candidates(
     members, start, centre, radius = point_clusters(rx, RX_CLUSTER, float(np.percentile(ctx.apertures.radius, 75)))
     size = np.diff(start)
     kept = 0
+    if ctx.options.compiled and kernels.available():
+        # the same tests compiled, a block of clusters per call (kernels.reflection_pairs)
+        for s in range(0, len(centre), COMPILED_CLUSTERS):
+            r_, c_ = kernels.reflection_pairs(scene, lv, beams, ctx.apertures, (members, start, centre, radius), rx,
+                                              s, min(len(centre), s + COMPILED_CLUSTERS), POINT_TEST)
+            kept += len(r_)
+            for b in range(0, len(r_), budget):
+                yield r_[b : b + budget], c_[b : b + budget]
+        stats[f"reflection_order_{order}_culled_beam"] += n * c - kept
+        return
     buf_r: list[np.ndarray] = []
     buf_c: list[np.ndarray] = []
     held = 0

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..topology.sectors import sector_lookup
 from . import kernels
-from .beams import chain_apertures, quad_side_planes, reflection_candidates
+from .beams import reflection_candidates
 from .context import TxContext
 from .geometry import diffraction_point_reduced
 from .images import ImageLevel, backtrace, build_image_levels
@@ -442,8 +442,8 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
             to_q = centre[q] - c0 - I
             beam = (to_q, np.linalg.norm(to_q, axis=1), radius[q], A + 0.5 * L[:, None] * w, 0.5 * L)
         if "receiver_aperture" not in disabled and ctx.apertures is not None:
-            _, _, qd = chain_apertures(scene, rx_lv, e_rows, quads=ctx.apertures.quads)
-            planes = np.concatenate([quad_side_planes(rx_lv.last[e_rows], qd[:, j]) for j in range(rx_lv.order)], axis=1)
+            planes = kernels.chain_side_planes(rx_lv.last[e_rows], rx_lv.polygons[e_rows], ctx.apertures.quads,
+                                               scene.polygon_normal, scene.polygon_offset)
             aperture = (planes, scene.length_tolerance(1e-9))
     frame = (dihedra.origin[diffr], w, ctx.sectors.x_hat[diffr], ctx.sectors.y_hat[diffr])
     win = None

@@ -1,0 +1,259 @@
+"""The numba kernels behind :mod:`wavepaths.search.kernels` (imported only when numba is installed).
+
+Each function is the compiled twin of a numpy reference named in its comment; the public
+wrappers, with the documented shapes and units, are in :mod:`wavepaths.search.kernels`.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+@numba.njit(cache=True, nogil=True)
+def receiver_pairs(I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h, beam,
+                   planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi, keller_tol,
+                   window, ok):
+    # A, B, M, origin, direction, x_hat, y_hat come transposed, (3, D): the first two
+    # stages run over contiguous rows, branch-free, and compact the survivors into `buf`
+    E = I.shape[0]
+    D = A.shape[1]
+    P = planes.shape[1]
+    n_mirror = 0
+    n_beam = 0
+    n_aperture = 0
+    n_window = 0
+    buf = np.empty(D, dtype=np.int64)
+    fm = np.ones(D, dtype=np.uint8)
+    fb = np.ones(D, dtype=np.uint8)
+    Ax, Ay, Az, Bx, By, Bz = A[0], A[1], A[2], B[0], B[1], B[2]
+    Mx, My, Mz = M[0], M[1], M[2]
+    for i in range(E):
+        i0, i1, i2 = I[i, 0], I[i, 1], I[i, 2]
+        # 1. mirror side: an edge end on the previous image's side of the last mirror, and
+        # 2. bounding-sphere beam (angle to the mirror's sphere + to the edge's sphere):
+        # evaluated over all edges into flags (a loop without branches, which vectorises),
+        # then the survivors compacted into `buf`; a pair is counted by the first it fails
+        if mirror:
+            s = side[i]
+            n0, n1, n2, o = s * n[i, 0], s * n[i, 1], s * n[i, 2], s * off[i]  # s = +-1: exact
+            for j in range(D):
+                fm[j] = max(n0 * Ax[j] + n1 * Ay[j] + n2 * Az[j], n0 * Bx[j] + n1 * By[j] + n2 * Bz[j]) - o > -plane_tol
+        if beam:
+            q0, q1, q2 = to_q[i, 0], to_q[i, 1], to_q[i, 2]
+            dq = dist_q[i]
+            sin_q = min(max(radius_q[i] / max(dq, 1e-300), 0.0), 1.0)
+            cos_q = np.sqrt(1.0 - sin_q * sin_q)
+            q_inside = dq <= radius_q[i]
+            for j in range(D):
+                m0, m1, m2 = Mx[j] - i0, My[j] - i1, Mz[j] - i2
+                dm = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+                cs = (q0 * m0 + q1 * m1 + q2 * m2) / max(dq * dm, 1e-300)
+                sin_m = min(max(h[j] / max(dm, 1e-300), 0.0), 1.0)
+                cos_m = np.sqrt(1.0 - sin_m * sin_m)
+                cos_sum = cos_q * cos_m - sin_q * sin_m
+                sin_sum = sin_q * cos_m + cos_q * sin_m
+                fb[j] = q_inside or dm <= h[j] or cs >= cos_sum - 1e-9 * sin_sum - 1e-12
+        pm = 0
+        c = 0
+        for j in range(D):  # (without a test its flags stay 1)
+            pm += fm[j]
+            buf[c] = j
+            c += fm[j] & fb[j]
+        n_mirror += D - pm
+        n_beam += pm - c
+        # 3. the beams through the mirrors' rectangles (early exit per pair)
+        if P > 0:
+            c2 = 0
+            for k in range(c):
+                j = buf[k]
+                a0, a1, a2 = Ax[j] - i0, Ay[j] - i1, Az[j] - i2
+                b0, b1, b2 = Bx[j] - i0, By[j] - i1, Bz[j] - i2
+                # 1e-9 of the distance to the apex (bounded above by the 1-norm) plus the tolerance
+                far = 1e-9 * max(abs(a0) + abs(a1) + abs(a2), abs(b0) + abs(b1) + abs(b2)) + aperture_tol
+                inside = True
+                for p in range(P):
+                    p0, p1, p2 = planes[i, p, 0], planes[i, p, 1], planes[i, p, 2]
+                    if max(p0 * a0 + p1 * a1 + p2 * a2, p0 * b0 + p1 * b1 + p2 * b2) < -far:
+                        inside = False
+                        break
+                buf[c2] = j
+                c2 += inside
+            n_aperture += c - c2
+            c = c2
+        # 4. Keller window, in the edge frame from the image's scene coordinates
+        if window:
+            r0, r1, r2 = R[i, 0], R[i, 1], R[i, 2]
+            c2 = 0
+            for k in range(c):
+                j = buf[k]
+                v0, v1, v2 = r0 - origin[0, j], r1 - origin[1, j], r2 - origin[2, j]
+                x = v0 * x_hat[0, j] + v1 * x_hat[1, j] + v2 * x_hat[2, j]
+                y = v0 * y_hat[0, j] + v1 * y_hat[1, j] + v2 * y_hat[2, j]
+                t = v0 * direction[0, j] + v1 * direction[1, j] + v2 * direction[2, j]
+                rho = np.hypot(x, y)
+                buf[c2] = j
+                c2 += (t - v_lo[j] - lo[j] * rho >= -keller_tol) and (t - v_hi[j] - hi[j] * rho <= keller_tol)
+            n_window += c - c2
+            c = c2
+        for k in range(c):
+            ok[i, buf[k]] = True
+    return n_mirror, n_beam, n_aperture, n_window
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _side_planes(a0, a1, a2, polys, quads, normal, offset, q, out):
+    # one chain (mirrors `polys`, last image a): each mirror's rectangle mirrored forward across
+    # the later mirrors (beams.chain_apertures), then the four side planes from the apex
+    # (beams.quad_side_planes: inward unit normals, zero for a degenerate plane) into out (4k, 3)
+    k = polys.shape[0]
+    for j in range(k):
+        p = polys[j]
+        for c in range(4):
+            for x in range(3):
+                q[c, x] = quads[p, c, x]
+        for i in range(j + 1, k):
+            m = polys[i]
+            n0, n1, n2, d = normal[m, 0], normal[m, 1], normal[m, 2], offset[m]
+            for c in range(4):
+                dist = q[c, 0] * n0 + q[c, 1] * n1 + q[c, 2] * n2 - d
+                q[c, 0] -= 2.0 * dist * n0
+                q[c, 1] -= 2.0 * dist * n1
+                q[c, 2] -= 2.0 * dist * n2
+        u0, u1, u2 = q[2, 0] - q[0, 0], q[2, 1] - q[0, 1], q[2, 2] - q[0, 2]
+        w0, w1, w2 = q[3, 0] - q[1, 0], q[3, 1] - q[1, 1], q[3, 2] - q[1, 2]
+        nq0, nq1, nq2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+        sd = nq0 * (a0 - q[0, 0]) + nq1 * (a1 - q[0, 1]) + nq2 * (a2 - q[0, 2])
+        sg = -1.0 if sd > 0 else (1.0 if sd < 0 else 0.0)
+        for c in range(4):
+            c1 = (c + 1) % 4
+            r0, r1, r2 = q[c, 0] - a0, q[c, 1] - a1, q[c, 2] - a2
+            s0, s1, s2 = q[c1, 0] - a0, q[c1, 1] - a1, q[c1, 2] - a2
+            m0, m1, m2 = r1 * s2 - r2 * s1, r2 * s0 - r0 * s2, r0 * s1 - r1 * s0
+            norm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            f = sg / norm if norm > 0 else 0.0
+            out[4 * j + c, 0] = m0 * f
+            out[4 * j + c, 1] = m1 * f
+            out[4 * j + c, 2] = m2 * f
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_side_planes(apex, polys, quads, normal, offset, out):
+    q = np.empty((4, 3))
+    for e in range(polys.shape[0]):
+        _side_planes(apex[e, 0], apex[e, 1], apex[e, 2], polys[e], quads, normal, offset, q, out[e])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _beam_meets(a0, a1, a2, p0, p1, p2, pr, c0, c1, c2, cr, slack):
+    # beams.beam_meets_spheres for one pair: the caps of directions subtended from the apex
+    # by the two spheres overlap (within `slack` rad), or the apex is inside either sphere
+    t0, t1, t2 = p0 - a0, p1 - a1, p2 - a2
+    dp = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    u0, u1, u2 = c0 - a0, c1 - a1, c2 - a2
+    dq = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    if dp <= pr or dq <= cr:
+        return True
+    half_p = math.asin(min(max(pr / max(dp, 1e-300), 0.0), 1.0))
+    half_q = math.asin(min(max(cr / max(dq, 1e-300), 0.0), 1.0))
+    cs = (t0 * u0 + t1 * u1 + t2 * u2) / max(dp * dq, 1e-300)
+    return math.acos(min(max(cs, -1.0), 1.0)) <= half_p + half_q + slack
+
+
+@numba.njit(cache=True, nogil=True)
+def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, node_c, node_r, through_c,
+                     through_r, level_off, leaf_size, branch, node_slack, last_image, polys, cen, rad, quads, normal,
+                     offset, eps):
+    # beams.beams_reaching (tree descent with the node test, then the per-pair sphere and
+    # rectangle tests) and reflection_candidates' per-receiver point test, per target cluster
+    depth = level_off.shape[0] - 1
+    k = polys.shape[1]
+    cap = 1024
+    out_r = np.empty(cap, np.int64)
+    out_c = np.empty(cap, np.int64)
+    cnt = 0
+    stack_l = np.empty(depth * branch + 1, np.int64)
+    stack_n = np.empty(depth * branch + 1, np.int64)
+    q = np.empty((4, 3))
+    planes = np.empty((4 * k, 3))
+    n_items = items.shape[0]
+    for t in range(t_centre.shape[0]):
+        tc0, tc1, tc2, tr = t_centre[t, 0], t_centre[t, 1], t_centre[t, 2], t_radius[t]
+        top = 0
+        stack_l[0] = 0
+        stack_n[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            lvl = stack_l[top]
+            nd = stack_n[top]
+            g = level_off[lvl] + nd
+            a0, a1, a2, rho = node_c[g, 0], node_c[g, 1], node_c[g, 2], node_r[g]
+            ok = True
+            for j in range(k - 1, -1, -1):  # the last mirror first: it prunes most
+                if not _beam_meets(a0, a1, a2, through_c[j, g, 0], through_c[j, g, 1], through_c[j, g, 2],
+                                   through_r[j, g] + rho, tc0, tc1, tc2, tr + rho, node_slack):
+                    ok = False
+                    break
+            if not ok:
+                continue
+            if lvl < depth - 1:
+                n_next = level_off[lvl + 2] - level_off[lvl + 1]
+                for b in range(branch - 1, -1, -1):
+                    child = nd * branch + b
+                    if child < n_next:
+                        stack_l[top] = lvl + 1
+                        stack_n[top] = child
+                        top += 1
+                continue
+            for s in range(nd * leaf_size, min(nd * leaf_size + leaf_size, n_items)):
+                c = items[s]
+                b0, b1, b2 = last_image[c, 0], last_image[c, 1], last_image[c, 2]
+                m = polys[c, k - 1]
+                n0, n1, n2, d = normal[m, 0], normal[m, 1], normal[m, 2], offset[m]
+                sd = b0 * n0 + b1 * n1 + b2 * n2 - d
+                side = 1.0 if sd > 0 else (-1.0 if sd < 0 else 0.0)
+                e0, e1, e2 = tc0 - b0, tc1 - b1, tc2 - b2
+                far = 1e-9 * math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) + eps
+                if not side * (tc0 * n0 + tc1 * n1 + tc2 * n2 - d) < tr + far:
+                    continue
+                ok = True
+                for j in range(k - 1, -1, -1):
+                    if not _beam_meets(b0, b1, b2, cen[c, j, 0], cen[c, j, 1], cen[c, j, 2], rad[c, j],
+                                       tc0, tc1, tc2, tr, 1e-9):
+                        ok = False
+                        break
+                if not ok:
+                    continue
+                # the rectangles (beams.chain_beams_meet, sphere form)
+                _side_planes(b0, b1, b2, polys[c], quads, normal, offset, q, planes)
+                for p in range(4 * k):
+                    if planes[p, 0] * e0 + planes[p, 1] * e1 + planes[p, 2] * e2 < -(tr + far):
+                        ok = False
+                        break
+                if not ok:
+                    continue
+                # each receiver of the cluster as a point (chain_beams_meet, point form)
+                for u in range(start[t], start[t + 1]):
+                    r = members[u]
+                    if point_test:
+                        x0, x1, x2 = rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2
+                        far_x = 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps
+                        if not side * (rx[r, 0] * n0 + rx[r, 1] * n1 + rx[r, 2] * n2 - d) < far_x:
+                            continue
+                        inside = True
+                        for p in range(4 * k):
+                            if planes[p, 0] * x0 + planes[p, 1] * x1 + planes[p, 2] * x2 < -far_x:
+                                inside = False
+                                break
+                        if not inside:
+                            continue
+                    if cnt == cap:
+                        cap *= 2
+                        grow_r = np.empty(cap, np.int64)
+                        grow_c = np.empty(cap, np.int64)
+                        grow_r[:cnt] = out_r[:cnt]
+                        grow_c[:cnt] = out_c[:cnt]
+                        out_r, out_c = grow_r, grow_c
+                    out_r[cnt] = r
+                    out_c[cnt] = c
+                    cnt += 1
+    return out_r[:cnt], out_c[:cnt]
