@@ -73,6 +73,10 @@ def run_tiles(
 def _init_worker(scene, ctx, config) -> None:
     global _WORKER_STATE
     _WORKER_STATE = (scene, ctx, config)
+    # the pool's processes share the cores: each runs the compiled kernels on one thread
+    from ..search import kernels
+
+    kernels.set_threads(1)
 
 
 def _pool_tile(i: int, rx: np.ndarray) -> tuple[int, TileSums]:

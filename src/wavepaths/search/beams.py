@@ -675,10 +675,19 @@ def reflection_candidates(
     size = np.diff(start)
     kept = 0
     if ctx.options.compiled and kernels.available():
-        # the same tests compiled, a block of clusters per call (kernels.reflection_pairs)
-        for s in range(0, len(centre), COMPILED_CLUSTERS):
-            r_, c_ = kernels.reflection_pairs(scene, lv, beams, ctx.apertures, (members, start, centre, radius), rx,
-                                              s, min(len(centre), s + COMPILED_CLUSTERS), POINT_TEST)
+        # the same tests compiled, a block of clusters per call (kernels.reflection_pairs),
+        # the blocks on the kernels' threads
+        kernels.flat_beams(lv, beams)
+        nt = kernels.threads()
+        g = len(centre)
+        step = max(1, min(COMPILED_CLUSTERS, -(-g // (4 * nt))))
+        clusters = (members, start, centre, radius)
+
+        def block(s: int):
+            return kernels.reflection_pairs(scene, lv, beams, ctx.apertures, clusters, rx, s, min(g, s + step),
+                                            POINT_TEST)
+
+        for r_, c_ in kernels.in_threads(block, list(range(0, g, step)), nt):
             kept += len(r_)
             for b in range(0, len(r_), budget):
                 yield r_[b : b + budget], c_[b : b + budget]

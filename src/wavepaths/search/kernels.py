@@ -20,6 +20,7 @@ numba's cache).
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -34,6 +35,43 @@ def _compiled():
 
     return {"receiver_pairs": _numba.receiver_pairs, "chain_side_planes": _numba.chain_side_planes,
             "reflection_pairs": _numba.reflection_pairs}
+
+
+def threads() -> int:
+    """How many threads the compiled kernels may use (numba's setting; 1 without numba)."""
+    if _compiled() is None:
+        return 1
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def set_threads(n: int) -> None:
+    """Let the compiled kernels use ``n`` threads (e.g. 1 in each worker of a process pool)."""
+    if _compiled() is not None:
+        import numba
+
+        numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+
+
+def in_threads(fn: Callable, items: list, n: int) -> Iterator:
+    """``fn(item)`` for each item, in order, on up to ``n`` threads (for kernels that release
+    the GIL); at most ``2 n`` results are computed ahead of the consumer."""
+    if n <= 1 or len(items) <= 1:
+        for it in items:
+            yield fn(it)
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=n) as pool:
+        pending: deque = deque()
+        for it in items:
+            pending.append(pool.submit(fn, it))
+            if len(pending) >= 2 * n:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def available() -> bool:
@@ -64,6 +102,22 @@ def chain_side_planes(apex: np.ndarray, polys: np.ndarray, quads: np.ndarray, no
     _compiled()["chain_side_planes"](c(apex, dtype=np.float64), c(polys, dtype=np.int64), c(quads), c(normal),
                                      c(offset), out)
     return out
+
+
+def flat_beams(level, beams) -> dict:
+    """The arrays of a :class:`~wavepaths.search.beams.ChainBeams` tree as the compiled query
+    reads them (node levels concatenated), built once and kept in ``beams.flat``."""
+    flat = beams.flat
+    if not flat:
+        tree = beams.apex
+        flat["node_c"] = np.ascontiguousarray(np.concatenate(tree.centre))
+        flat["node_r"] = np.ascontiguousarray(np.concatenate(tree.radius))
+        flat["through_c"] = np.ascontiguousarray(np.stack([np.concatenate(t.centre) for t in beams.through]))
+        flat["through_r"] = np.ascontiguousarray(np.stack([np.concatenate(t.radius) for t in beams.through]))
+        flat["last_image"] = np.ascontiguousarray(level.images[:, -1])
+        flat["polys"] = np.ascontiguousarray(level.polygons, dtype=np.int64)
+        flat["level_off"] = np.concatenate([[0], np.cumsum([len(r) for r in tree.radius])]).astype(np.int64)
+    return flat
 
 
 def reflection_pairs(scene, level, beams, apertures, clusters, rx: np.ndarray, first: int, last: int,
@@ -100,16 +154,7 @@ def reflection_pairs(scene, level, beams, apertures, clusters, rx: np.ndarray, f
     from .beams import NODE_ANGLE_SLACK
 
     members, start, centre, radius = clusters
-    flat = beams.flat
-    if not flat:
-        tree = beams.apex
-        flat["level_off"] = np.concatenate([[0], np.cumsum([len(r) for r in tree.radius])]).astype(np.int64)
-        flat["node_c"] = np.ascontiguousarray(np.concatenate(tree.centre))
-        flat["node_r"] = np.ascontiguousarray(np.concatenate(tree.radius))
-        flat["through_c"] = np.ascontiguousarray(np.stack([np.concatenate(t.centre) for t in beams.through]))
-        flat["through_r"] = np.ascontiguousarray(np.stack([np.concatenate(t.radius) for t in beams.through]))
-        flat["last_image"] = np.ascontiguousarray(level.images[:, -1])
-        flat["polys"] = np.ascontiguousarray(level.polygons, dtype=np.int64)
+    flat = flat_beams(level, beams)
     c = np.ascontiguousarray
     return _compiled()["reflection_pairs"](
         c(centre[first:last]), c(radius[first:last]), c(members, dtype=np.int64), c(start[first:last + 1], dtype=np.int64),
@@ -130,7 +175,7 @@ def receiver_pairs(
     R: np.ndarray,
     frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     window: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None,
-) -> tuple[np.ndarray, int, int, int, int]:
+) -> tuple[np.ndarray, np.ndarray, int, int, int, int]:
     """The dense receiver-side tests of :func:`wavepaths.search.tile._receiver_side`, fused per pair.
 
     Parameters
@@ -162,8 +207,8 @@ def receiver_pairs(
 
     Returns
     -------
-    ok : (E, D) bool
-        The pairs that pass every test given.
+    rows, cols : (k,) int64
+        The pairs (image row, edge column) that pass every test given, row by row.
     rejected_mirror_side, rejected_beam, rejected_aperture, rejected_keller_window : int
         How many pairs each test rejected (each pair counted by the first test it fails, in
         this order).
@@ -180,14 +225,19 @@ def receiver_pairs(
     planes, aperture_tol = aperture if aperture is not None else (np.zeros((E, 0, 3)), 0.0)
     v_lo, lo, v_hi, hi, keller_tol = window if window is not None else (z1, z1, z1, z1, 0.0)
     origin, direction, x_hat, y_hat = frame
-    ok = np.zeros((E, D), dtype=np.bool_)
+    out_j = np.empty((E, D), dtype=np.int32)
+    cnt = np.empty(E, dtype=np.int64)
+    counts = np.zeros((E, 4), dtype=np.int64)
     c = np.ascontiguousarray
 
     def t(x):  # per-edge arrays transposed, (3, D)
         return np.ascontiguousarray(np.asarray(x).T)
 
-    counts = k(c(I), c(n), c(off), c(side), t(A), t(B), float(plane_tol), mirror is not None,
+    k(c(I), c(n), c(off), c(side), t(A), t(B), float(plane_tol), mirror is not None,
                c(to_q), c(dist_q), c(radius_q), t(M), c(h), beam is not None, c(planes), float(aperture_tol),
                c(R), t(origin), t(direction), t(x_hat), t(y_hat), c(v_lo), c(lo), c(v_hi), c(hi),
-               float(keller_tol), window is not None, ok)
-    return ok, int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3])
+               float(keller_tol), window is not None, out_j, cnt, counts)
+    rows = np.repeat(np.arange(E), cnt)
+    cols = out_j[rows, np.arange(len(rows)) - np.repeat(np.cumsum(cnt) - cnt, cnt)].astype(np.int64)
+    n = counts.sum(axis=0)
+    return rows, cols, int(n[0]), int(n[1]), int(n[2]), int(n[3])

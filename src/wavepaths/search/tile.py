@@ -450,7 +450,8 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
     if window is not None:
         v_lo, lo, v_hi, hi = window
         win = (v_lo[diffr], lo[diffr], v_hi[diffr], hi[diffr], scene.length_tolerance(1e-9))
-    ok, n_mirror, n_beam, n_aperture, n_window = kernels.receiver_pairs(I, mirror, A, B, beam, aperture, R, frame, win)
+    ie, idd, n_mirror, n_beam, n_aperture, n_window = kernels.receiver_pairs(I, mirror, A, B, beam, aperture, R,
+                                                                             frame, win)
     if mirror is not None:
         stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += n_mirror
     if beam is not None:
@@ -459,7 +460,6 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
         stats[f"{tag}_receiver_pairs_rejected_aperture"] += n_aperture
     if win is not None:
         stats[f"{tag}_receiver_pairs_rejected_keller_window"] += n_window
-    ie, idd = np.nonzero(ok)
     return _kept_pairs_end_side(scene, ctx, rx_lv, e_rows[ie], diffr[idd], None, stats, tag)
 
 
