@@ -678,8 +678,8 @@ def reflection_candidates(
         # the same tests compiled, a block of clusters per call (kernels.reflection_pairs),
         # the blocks on the kernels' threads
         kernels.flat_beams(lv, beams)
-        nt = kernels.threads()
         g = len(centre)
+        nt = kernels.threads() if g * len(lv) >= kernels.PARALLEL_MIN_PAIRS else 1
         step = max(1, min(COMPILED_CLUSTERS, -(-g // (4 * nt))))
         clusters = (members, start, centre, radius)
 
@@ -687,10 +687,21 @@ def reflection_candidates(
             return kernels.reflection_pairs(scene, lv, beams, ctx.apertures, clusters, rx, s, min(g, s + step),
                                             POINT_TEST)
 
+        held_r: list[np.ndarray] = []
+        held_c: list[np.ndarray] = []
+        held = 0
         for r_, c_ in kernels.in_threads(block, list(range(0, g, step)), nt):
             kept += len(r_)
-            for b in range(0, len(r_), budget):
-                yield r_[b : b + budget], c_[b : b + budget]
+            held_r.append(r_)
+            held_c.append(c_)
+            held += len(r_)
+            if held >= budget:  # yield in blocks of about `budget` (the back-trace's batch)
+                r_, c_ = np.concatenate(held_r), np.concatenate(held_c)
+                for b in range(0, len(r_), budget):
+                    yield r_[b : b + budget], c_[b : b + budget]
+                held_r, held_c, held = [], [], 0
+        if held:
+            yield np.concatenate(held_r), np.concatenate(held_c)
         stats[f"reflection_order_{order}_culled_beam"] += n * c - kept
         return
     buf_r: list[np.ndarray] = []

@@ -25,6 +25,11 @@ from typing import Callable, Iterator
 import numpy as np
 
 
+PARALLEL_MIN_PAIRS = 1 << 22
+"""Pairs below which a kernel runs on the calling thread: starting the threads costs more
+than they save on small calls (the street-canyon map ran 1.3x slower with them)."""
+
+
 @lru_cache(maxsize=1)
 def _compiled():
     """The compiled kernels, or ``None`` when numba is not installed."""
@@ -33,7 +38,7 @@ def _compiled():
     except ImportError:
         return None
 
-    return {"receiver_pairs": _numba.receiver_pairs, "chain_side_planes": _numba.chain_side_planes,
+    return {"receiver_pairs": _numba.receiver_pairs, "receiver_pairs_serial": _numba.receiver_pairs_serial, "chain_side_planes": _numba.chain_side_planes,
             "reflection_pairs": _numba.reflection_pairs}
 
 
@@ -213,7 +218,8 @@ def receiver_pairs(
         How many pairs each test rejected (each pair counted by the first test it fails, in
         this order).
     """
-    k = _compiled()["receiver_pairs"]
+    k = _compiled()["receiver_pairs" if len(I) * len(A) >= PARALLEL_MIN_PAIRS and threads() > 1
+                    else "receiver_pairs_serial"]
     E, D = len(I), len(A)
     z1 = np.zeros(D)
     if mirror is None:
