@@ -22,3 +22,5 @@ else
   echo "== installing wavepaths (with the fast extra)"
   .venv/bin/python -m pip install --quiet -e ".[fast]"
 fi
+echo "== compiling the numba kernels (cached: once per machine)"
+.venv/bin/python -c "from wavepaths.search import kernels; print('   compiled' if kernels.warm_up() else '   numba not installed: the numpy reference runs')"

@@ -19,6 +19,7 @@ numba's cache).
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 from typing import Callable, Iterator
 
@@ -77,6 +78,26 @@ def in_threads(fn: Callable, items: list, n: int) -> Iterator:
                 yield pending.popleft().result()
         while pending:
             yield pending.popleft().result()
+
+
+def warm_up() -> bool:
+    """Compile every kernel now (numba caches them: once per machine), so that the first
+    query does not pay for it (about 10 s). ``scripts/setup.sh`` calls it. Returns whether
+    numba is installed."""
+    if _compiled() is None:
+        return False
+    from ..scene import load_scene
+    from .options import TraceOptions
+    from .trace import trace
+
+    scene = load_scene("street_canyon")
+    rx = np.array([[20.0, 0.0, 1.5], [60.0, 5.0, 1.5], [-20.0, 30.0, 1.5]])
+    trace(scene, np.array([[-60.0, 0.0, 10.0]]), rx,
+          TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2))
+    z3 = np.zeros((2, 3))
+    frame = (z3, z3, z3, z3)
+    receiver_pairs(z3, None, z3, z3, None, None, z3, frame, None, parallel=True)
+    return True
 
 
 def available() -> bool:
@@ -180,6 +201,7 @@ def receiver_pairs(
     R: np.ndarray,
     frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     window: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None,
+    parallel: bool | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, int, int, int]:
     """The dense receiver-side tests of :func:`wavepaths.search.tile._receiver_side`, fused per pair.
 
@@ -209,6 +231,9 @@ def receiver_pairs(
     window : (v_lo, lo, v_hi, hi (D,), keller_tol) or None
         The Keller window of each edge (:func:`wavepaths.search.tile._keller_window`,
         indexed by these D edges) and its margin [m].
+    parallel : bool, optional
+        Run blocks of images on the kernels' threads; default: for calls of at least
+        :data:`PARALLEL_MIN_PAIRS` pairs when there are threads.
 
     Returns
     -------
@@ -218,8 +243,13 @@ def receiver_pairs(
         How many pairs each test rejected (each pair counted by the first test it fails, in
         this order).
     """
-    k = _compiled()["receiver_pairs" if len(I) * len(A) >= PARALLEL_MIN_PAIRS and threads() > 1
-                    else "receiver_pairs_serial"]
+    if parallel is None:
+        # numba's default threading layer (workqueue) must not be entered from two threads at
+        # once: only the main thread starts the parallel kernel (a Dask worker's task threads
+        # run the serial one)
+        parallel = (len(I) * len(A) >= PARALLEL_MIN_PAIRS and threads() > 1
+                    and threading.current_thread() is threading.main_thread())
+    k = _compiled()["receiver_pairs" if parallel else "receiver_pairs_serial"]
     E, D = len(I), len(A)
     z1 = np.zeros(D)
     if mirror is None:
