@@ -26,7 +26,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 
-PARALLEL_MIN_PAIRS = 1 << 22
+PARALLEL_MIN_PAIRS = 1 << 20
 """Pairs below which a kernel runs on the calling thread: starting the threads costs more
 than they save on small calls (the street-canyon map ran 1.3x slower with them)."""
 
