@@ -657,7 +657,8 @@ def reflection_candidates(
     :class:`ChainBeams` tree (:func:`beams_reaching`); each of the cluster's receivers is
     then tested as a point (:func:`chain_beams_meet`). Both tests only drop pairs no leg
     from the chain can reach, so no path is lost. ``stats`` counts the dropped pairs as
-    ``reflection_order_{order}_culled_beam``.
+    ``reflection_order_{order}_culled_beam``. With ``ctx.options.compiled`` and numba, the
+    same tests run compiled (:func:`_reflection_candidates_compiled`).
     """
     lv = ctx.levels[order]
     c, n = len(lv), len(rx)
@@ -672,38 +673,12 @@ def reflection_candidates(
         return
     # scattered receivers are queried one by one: a cluster may be as wide as a typical mirror
     members, start, centre, radius = point_clusters(rx, RX_CLUSTER, float(np.percentile(ctx.apertures.radius, 75)))
+    if ctx.options.compiled and kernels.available():
+        yield from _reflection_candidates_compiled(scene, ctx, order, rx, stats, budget,
+                                                   (members, start, centre, radius))
+        return
     size = np.diff(start)
     kept = 0
-    if ctx.options.compiled and kernels.available():
-        # the same tests compiled, a block of clusters per call (kernels.reflection_pairs),
-        # the blocks on the kernels' threads
-        kernels.flat_beams(lv, beams)
-        g = len(centre)
-        nt = kernels.threads() if g * len(lv) >= kernels.PARALLEL_MIN_PAIRS else 1
-        step = max(1, min(COMPILED_CLUSTERS, -(-g // (4 * nt))))
-        clusters = (members, start, centre, radius)
-
-        def block(s: int):
-            return kernels.reflection_pairs(scene, lv, beams, ctx.apertures, clusters, rx, s, min(g, s + step),
-                                            POINT_TEST)
-
-        held_r: list[np.ndarray] = []
-        held_c: list[np.ndarray] = []
-        held = 0
-        for r_, c_ in kernels.in_threads(block, list(range(0, g, step)), nt):
-            kept += len(r_)
-            held_r.append(r_)
-            held_c.append(c_)
-            held += len(r_)
-            if held >= budget:  # yield in blocks of about `budget` (the back-trace's batch)
-                r_, c_ = np.concatenate(held_r), np.concatenate(held_c)
-                for b in range(0, len(r_), budget):
-                    yield r_[b : b + budget], c_[b : b + budget]
-                held_r, held_c, held = [], [], 0
-        if held:
-            yield np.concatenate(held_r), np.concatenate(held_c)
-        stats[f"reflection_order_{order}_culled_beam"] += n * c - kept
-        return
     buf_r: list[np.ndarray] = []
     buf_c: list[np.ndarray] = []
     held = 0
@@ -727,6 +702,40 @@ def reflection_candidates(
         kept += len(r_)
         yield r_, c_
     stats[f"reflection_order_{order}_culled_beam"] += n * c - kept
+
+
+def _reflection_candidates_compiled(scene: "Scene", ctx: "TxContext", order: int, rx: np.ndarray, stats, budget: int,
+                                    clusters) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """:func:`reflection_candidates` through the compiled query (:func:`~wavepaths.search.kernels.reflection_pairs`):
+    blocks of clusters, on the kernels' threads when the call is large, yielded in blocks of
+    about ``budget`` pairs; the same pairs and the same ``culled_beam`` count."""
+    lv = ctx.levels[order]
+    beams = ctx.beams[order]
+    kernels.flat_beams(lv, beams)  # built once, before any thread reads it
+    g = len(clusters[2])
+    nt = kernels.threads() if g * len(lv) >= kernels.PARALLEL_MIN_PAIRS else 1
+    step = max(1, min(COMPILED_CLUSTERS, -(-g // (4 * nt))))
+
+    def block(s: int):
+        return kernels.reflection_pairs(scene, lv, beams, ctx.apertures, clusters, rx, s, min(g, s + step), POINT_TEST)
+
+    kept = 0
+    held_r: list[np.ndarray] = []
+    held_c: list[np.ndarray] = []
+    held = 0
+    for r_, c_ in kernels.in_threads(block, list(range(0, g, step)), nt):
+        kept += len(r_)
+        held_r.append(r_)
+        held_c.append(c_)
+        held += len(r_)
+        if held >= budget:
+            r_, c_ = np.concatenate(held_r), np.concatenate(held_c)
+            for b in range(0, len(r_), budget):
+                yield r_[b : b + budget], c_[b : b + budget]
+            held_r, held_c, held = [], [], 0
+    if held:
+        yield np.concatenate(held_r), np.concatenate(held_c)
+    stats[f"reflection_order_{order}_culled_beam"] += len(rx) * len(lv) - kept
 
 
 # ---- image beams and edges (diffraction after reflections) ---------------------------

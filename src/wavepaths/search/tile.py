@@ -530,7 +530,7 @@ def diffraction_tile(
     src_all = ctx.diffraction_sources[a]
     m = int(ctx.sectors.angles.shape[1])
     # receiver images per chunk: the numpy receiver side holds about m + 4 (images x dihedra)
-    # temporaries, the compiled one a single boolean mask (but the survivors still ~ m + 4 arrays)
+    # temporaries, the compiled one a single int32 array of the survivors' columns
     per_pair = 1 if (ctx.options.compiled and kernels.available()) else m + 4
     step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
     for s in range(0, len(rx_lv), step):
