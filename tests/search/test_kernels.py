@@ -146,3 +146,26 @@ def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng):
     assert len(pairs[True]) > 100 and culled[True] > 0
     assert pairs[True] == pairs[False]
     assert culled[True] == culled[False]
+
+
+@needs_numba
+@pytest.mark.parametrize("order", [1, 2])
+def test_compiled_chains_meeting_edges_equal_the_numpy_tree_query(order, rng):
+    """beams.chains_meeting_edges: the same (chain, dihedron) pairs compiled or in numpy, for
+    the transmitter's chains and for receivers' chains."""
+    from wavepaths.search.beams import chains_meeting_edges, edge_tree, scene_apertures
+
+    scene = load_scene("street_canyon")
+    apertures = scene_apertures(scene)
+    tree = edge_tree(scene, np.nonzero(scene.dihedra.diffracting)[0])
+    sources = np.concatenate([TX, _receivers(rng, 8)])
+    lv = build_image_levels(scene, sources, order, True)[order]
+    got = {}
+    for compiled in (True, False):
+        pairs = list(chains_meeting_edges(scene, lv, apertures, tree, chunk=37, compiled=compiled))
+        c = np.concatenate([p[0] for p in pairs])
+        e = np.concatenate([p[1] for p in pairs])
+        got[compiled] = set(zip(c.tolist(), e.tolist()))
+        assert len(got[compiled]) == len(c)
+    assert 100 < len(got[True]) < len(lv) * len(tree)
+    assert got[True] == got[False]

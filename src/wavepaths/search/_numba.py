@@ -288,3 +288,117 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
                     out_c[cnt] = c
                     cnt += 1
     return out_r[:cnt], out_c[:cnt]
+
+
+@numba.njit(cache=True, nogil=True)
+def chains_edges(apex, polys, p_centre, p_radius, normal, offset, quads, items, node_c, node_r, level_off, leaf_size,
+                 branch, origin, direction, length, eps):
+    # beams.chains_meeting_edges for a block of chains: per chain its 1 + 4k bounding planes
+    # (beyond the last mirror, then the side planes of the beams through the apertures'
+    # rectangles), a descent of the edge tree (a node goes when its sphere lies outside one
+    # plane), then per edge the segment test on the same planes and the sphere cones
+    m, k = polys.shape
+    depth = level_off.shape[0] - 1
+    n_items = items.shape[0]
+    cap = 1024
+    out_c = np.empty(cap, np.int64)
+    out_e = np.empty(cap, np.int64)
+    cnt = 0
+    stack_l = np.empty(depth * branch + 1, np.int64)
+    stack_n = np.empty(depth * branch + 1, np.int64)
+    q = np.empty((4, 3))
+    side_planes = np.empty((4 * k, 3))
+    planes = np.empty((1 + 4 * k, 3))
+    shift = np.zeros(1 + 4 * k)
+    cen = np.empty((k, 3))
+    rad = np.empty(k)
+    for ci in range(m):
+        a0, a1, a2 = apex[ci, 0], apex[ci, 1], apex[ci, 2]
+        # the apertures' spheres mirrored forward across the later mirrors (beams.chain_apertures)
+        for j in range(k):
+            pj = polys[ci, j]
+            c0, c1, c2 = p_centre[pj, 0], p_centre[pj, 1], p_centre[pj, 2]
+            for i in range(j + 1, k):
+                mi = polys[ci, i]
+                dist = c0 * normal[mi, 0] + c1 * normal[mi, 1] + c2 * normal[mi, 2] - offset[mi]
+                c0 -= 2.0 * dist * normal[mi, 0]
+                c1 -= 2.0 * dist * normal[mi, 1]
+                c2 -= 2.0 * dist * normal[mi, 2]
+            cen[j, 0], cen[j, 1], cen[j, 2] = c0, c1, c2
+            rad[j] = p_radius[pj]
+        last = polys[ci, k - 1]
+        n0, n1, n2, d = normal[last, 0], normal[last, 1], normal[last, 2], offset[last]
+        sd = a0 * n0 + a1 * n1 + a2 * n2 - d
+        side = 1.0 if sd > 0 else (-1.0 if sd < 0 else 0.0)
+        planes[0, 0], planes[0, 1], planes[0, 2] = -side * n0, -side * n1, -side * n2
+        shift[0] = -abs(sd)
+        _side_planes(a0, a1, a2, polys[ci], quads, normal, offset, q, side_planes)
+        # the last aperture first, as the numpy query orders them (it prunes most)
+        for j in range(k):
+            jj = k - 1 - j
+            for c in range(4):
+                for x in range(3):
+                    planes[1 + 4 * j + c, x] = side_planes[4 * jj + c, x]
+        top = 1
+        stack_l[0] = 0
+        stack_n[0] = 0
+        while top > 0:
+            top -= 1
+            lvl = stack_l[top]
+            nd = stack_n[top]
+            g = level_off[lvl] + nd
+            r0, r1, r2 = node_c[g, 0] - a0, node_c[g, 1] - a1, node_c[g, 2] - a2
+            far = 1e-9 * math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) + eps
+            ok = True
+            for p in range(1 + 4 * k):
+                if planes[p, 0] * r0 + planes[p, 1] * r1 + planes[p, 2] * r2 + shift[p] < -(node_r[g] + far):
+                    ok = False
+                    break
+            if not ok:
+                continue
+            if lvl < depth - 1:
+                n_next = level_off[lvl + 2] - level_off[lvl + 1]
+                for b in range(branch - 1, -1, -1):
+                    child = nd * branch + b
+                    if child < n_next:
+                        stack_l[top] = lvl + 1
+                        stack_n[top] = child
+                        top += 1
+                continue
+            for s in range(nd * leaf_size, min(nd * leaf_size + leaf_size, n_items)):
+                e = items[s]
+                L = length[e]
+                x0, x1, x2 = origin[e, 0] - a0, origin[e, 1] - a1, origin[e, 2] - a2
+                y0, y1, y2 = x0 + L * direction[e, 0], x1 + L * direction[e, 1], x2 + L * direction[e, 2]
+                far = 1e-9 * max(math.sqrt(x0 * x0 + x1 * x1 + x2 * x2), math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)) + eps
+                ok = True
+                for p in range(1 + 4 * k):
+                    da = planes[p, 0] * x0 + planes[p, 1] * x1 + planes[p, 2] * x2 + shift[p]
+                    db = planes[p, 0] * y0 + planes[p, 1] * y1 + planes[p, 2] * y2 + shift[p]
+                    if max(da, db) < -far:
+                        ok = False
+                        break
+                if not ok:
+                    continue
+                half = 0.5 * L
+                mid0 = origin[e, 0] + half * direction[e, 0]
+                mid1 = origin[e, 1] + half * direction[e, 1]
+                mid2 = origin[e, 2] + half * direction[e, 2]
+                for j in range(k - 1, -1, -1):
+                    if not _beam_meets(a0, a1, a2, cen[j, 0], cen[j, 1], cen[j, 2], rad[j],
+                                       mid0, mid1, mid2, half * (1 + 1e-9) + eps, 1e-9):
+                        ok = False
+                        break
+                if not ok:
+                    continue
+                if cnt == cap:
+                    cap *= 2
+                    grow_c = np.empty(cap, np.int64)
+                    grow_e = np.empty(cap, np.int64)
+                    grow_c[:cnt] = out_c[:cnt]
+                    grow_e[:cnt] = out_e[:cnt]
+                    out_c, out_e = grow_c, grow_e
+                out_c[cnt] = ci
+                out_e[cnt] = e
+                cnt += 1
+    return out_c[:cnt], out_e[:cnt]

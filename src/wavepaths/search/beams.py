@@ -750,7 +750,7 @@ def edge_tree(scene: "Scene", dihedra: np.ndarray) -> SphereTree:
 
 def chains_meeting_edges(
     scene: "Scene", level: "ImageLevel", apertures: Apertures, tree: SphereTree, chunk: int = 1 << 14,
-    budget: int = 1 << 17,
+    budget: int = 1 << 17, compiled: bool = False,
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(chain, dihedron) pairs of ``level`` (order >= 1) whose last leg can end on the dihedron's edge.
 
@@ -777,6 +777,9 @@ def chains_meeting_edges(
         Chains queried together.
     budget : int
         (chain, node) pairs tested at once.
+    compiled : bool
+        Run the compiled query (:func:`wavepaths.search.kernels.chains_meeting_edges`, the
+        same tests) when numba is installed.
 
     Yields
     ------
@@ -784,6 +787,15 @@ def chains_meeting_edges(
     """
     k = level.order
     if len(tree) == 0 or len(level) == 0:
+        return
+    if compiled and kernels.available():
+        # the same tests compiled (kernels.chains_meeting_edges), blocks of chains on threads
+        blocks = [np.arange(s0, min(len(level), s0 + chunk), dtype=np.int64) for s0 in range(0, len(level), chunk)]
+        nt = kernels.threads() if len(level) * len(tree) >= kernels.PARALLEL_MIN_PAIRS else 1
+        for ch, e in kernels.in_threads(lambda rows: kernels.chains_meeting_edges(scene, level, apertures, tree, rows),
+                                        blocks, nt):
+            if len(ch):
+                yield ch, e
         return
     dih = scene.dihedra
     eps = scene.length_tolerance(1e-9)

@@ -101,7 +101,8 @@ PAIR_BLOCK = 1 << 21  # (image, dihedron) pairs given the sector test at once
 
 
 def _source_pairs(
-    scene: "Scene", lv: ImageLevel, diffracting: np.ndarray, edges, apertures: Apertures | None, cull: bool
+    scene: "Scene", lv: ImageLevel, diffracting: np.ndarray, edges, apertures: Apertures | None, cull: bool,
+    compiled: bool = False,
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Blocks of (chain, dihedron) pairs of one order that may start a diffracted path.
 
@@ -116,7 +117,7 @@ def _source_pairs(
             r = np.arange(s, min(len(lv), s + per))
             yield np.repeat(r, len(diffracting)), np.tile(diffracting, len(r))
         return
-    yield from chains_meeting_edges(scene, lv, apertures, edges)
+    yield from chains_meeting_edges(scene, lv, apertures, edges, compiled=compiled)
 
 
 def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> TxContext:
@@ -151,7 +152,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             tested = 0
             kept_c, kept_d, kept_s = [], [], []
             cull = "source_beam" not in options.disable_culling
-            for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, cull):
+            for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, cull, options.compiled):
                 tested += len(c)
                 sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
                 keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)

@@ -40,7 +40,7 @@ def _compiled():
         return None
 
     return {"receiver_pairs": _numba.receiver_pairs, "receiver_pairs_serial": _numba.receiver_pairs_serial, "chain_side_planes": _numba.chain_side_planes,
-            "reflection_pairs": _numba.reflection_pairs}
+            "reflection_pairs": _numba.reflection_pairs, "chains_edges": _numba.chains_edges}
 
 
 def threads() -> int:
@@ -189,6 +189,41 @@ def reflection_pairs(scene, level, beams, apertures, clusters, rx: np.ndarray, f
         float(NODE_ANGLE_SLACK), flat["last_image"], flat["polys"], c(beams.centre), c(beams.radius), c(apertures.quads),
         c(scene.polygon_normal), c(scene.polygon_offset), float(scene.length_tolerance(1e-9)),
     )
+
+
+def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(chain, dihedron) pairs of chains ``rows`` of ``level`` (order >= 1) whose last leg can end on the edge.
+
+    The compiled :func:`wavepaths.search.beams.chains_meeting_edges` for one block of
+    chains: per chain its bounding planes (beyond the last mirror, the side planes of the
+    beams through its apertures' rectangles), one descent of the edge tree ``tree`` with the
+    same node test, then per edge the segment test on the planes and the cones through the
+    apertures' spheres; the same margins.
+
+    Returns
+    -------
+    chains : (b,) int64
+        Rows of ``level`` (from ``rows``).
+    dihedra : (b,) int64
+        The tree's items (dihedron ids).
+    """
+    c = np.ascontiguousarray
+    tree_flat = _tree_arrays(tree)
+    dih = scene.dihedra
+    ci, e = _compiled()["chains_edges"](
+        c(level.last[rows]), c(level.polygons[rows], dtype=np.int64), c(apertures.centre), c(apertures.radius),
+        c(scene.polygon_normal), c(scene.polygon_offset), c(apertures.quads), c(tree.items, dtype=np.int64),
+        tree_flat[0], tree_flat[1], tree_flat[2], int(tree.leaf_size), int(tree.branch),
+        c(dih.origin), c(dih.direction), c(dih.length), float(scene.length_tolerance(1e-9)),
+    )
+    return rows[ci], e
+
+
+def _tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A :class:`~wavepaths.search.beams.SphereTree`'s node levels concatenated: centres
+    (N, 3), radii (N,) and each level's first node (depth + 1,)."""
+    return (np.ascontiguousarray(np.concatenate(tree.centre)), np.ascontiguousarray(np.concatenate(tree.radius)),
+            np.concatenate([[0], np.cumsum([len(r) for r in tree.radius])]).astype(np.int64))
 
 
 def receiver_pairs(

@@ -330,7 +330,7 @@ def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_
     wanted = np.zeros(len(scene.dihedra), dtype=bool)
     wanted[diffr] = True
     ch, dd = [], []
-    for c, d in chains_meeting_edges(scene, sub, ctx.apertures, edges):
+    for c, d in chains_meeting_edges(scene, sub, ctx.apertures, edges, compiled=ctx.options.compiled):
         keep = wanted[d]
         ch.append(c[keep])
         dd.append(d[keep])
