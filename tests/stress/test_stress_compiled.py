@@ -1,0 +1,37 @@
+"""Property-based tests (Hypothesis): the compiled kernels find exactly the paths of the numpy
+reference, with transmitters and receivers anywhere, on vertices, edges and faces or 1e-9 m
+off them (the defined edge cases), where the culling margins are tightest."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, note
+from hypothesis import strategies as st
+
+from wavepaths.search import TraceOptions, kernels, trace
+
+from ..search.helpers import path_keys
+from .test_stress_properties import SCENES, SETTINGS, points
+
+pytestmark = pytest.mark.skipif(not kernels.available(), reason="numba is not installed (the `fast` extra)")
+
+OPTS = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2, rx_batch=3)
+
+
+@SETTINGS
+@given(st.data())
+def test_compiled_and_numpy_find_the_same_paths(data):
+    name = data.draw(st.sampled_from(sorted(SCENES)))
+    scene = SCENES[name]
+    tx = data.draw(points(name))[None, :]
+    rx = np.array([data.draw(points(name)) for _ in range(4)])
+    assume(np.linalg.norm(rx - tx, axis=1).min() > 1e-6)
+    with warnings.catch_warnings():  # points on faces are defined edge cases; trace warns of them
+        warnings.simplefilter("ignore")
+        fast = trace(scene, tx, rx, OPTS)
+        ref = trace(scene, tx, rx, OPTS.with_(compiled=False))
+    note(f"{name} tx={tx.tolist()} rx={rx.tolist()} paths={len(ref)}")
+    assert path_keys(fast) == path_keys(ref)
