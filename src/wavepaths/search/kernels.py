@@ -1,20 +1,26 @@
 """Optional compiled kernels (numba) for the densest loops of the path search.
 
-The numpy code in :mod:`wavepaths.search.tile` is the reference. Where a test is an outer
-product over (receiver images x dihedra), numpy materialises a dozen (E, D) temporaries
-per chunk; on ``etoile_crop`` at depth 3 that is 596 M pairs at about 54 ns each, the
-largest single cost of the query (``docs/benchmarks.md``). The kernels here evaluate the
-same tests, with the same margins, pair by pair with an early exit, and write one boolean
-per pair.
+The numpy code is the reference. Four loops are outer products whose numpy form
+materialises large temporaries per chunk (on this machine a fresh array costs about 12 ns
+per element in page faults alone); here each runs pair by pair, with the same tests and
+margins and an early exit:
+
+* :func:`receiver_pairs`: the receiver side of the diffraction search, (receiver images x
+  dihedra) (:func:`wavepaths.search.tile._receiver_side`; on ``etoile_crop`` at depth 3,
+  600 M pairs at about 54 ns each in numpy, about 6 ns here), with one more test, the
+  beams through the image's mirrors' rectangles (:func:`chain_side_planes`);
+* :func:`reflection_pairs`: the reflection candidates, (receiver clusters x chain-beam
+  tree) (:func:`wavepaths.search.beams.beams_reaching` and the per-receiver point test);
+* :func:`chains_meeting_edges`: (image chains x edge tree)
+  (:func:`wavepaths.search.beams.chains_meeting_edges`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
-``TraceOptions(compiled=False)``, the numpy reference runs. Results agree pair for pair
-except where a quantity lands within rounding (~1e-16 relative) of a test's margin: the
-kernels compute a pair's distances directly, the numpy code by expanded matrix products
-(tests/search/test_kernels.py compares them).
-
-The kernels are compiled on first use (``cache=True``: once per machine, then loaded from
-numba's cache).
+``TraceOptions(compiled=False)``, the numpy reference runs and finds the same paths.
+Kernel and reference agree pair for pair except where a quantity lands within rounding
+(~1e-16 relative) of a test's margin (tests/search/test_kernels.py and
+tests/stress/test_stress_compiled.py compare them). The numba code is in
+:mod:`wavepaths.search._numba`, compiled on first use and cached by numba (once per
+machine; :func:`warm_up` does it ahead).
 """
 
 from __future__ import annotations
@@ -39,8 +45,9 @@ def _compiled():
     except ImportError:
         return None
 
-    return {"receiver_pairs": _numba.receiver_pairs, "receiver_pairs_serial": _numba.receiver_pairs_serial, "chain_side_planes": _numba.chain_side_planes,
-            "reflection_pairs": _numba.reflection_pairs, "chains_edges": _numba.chains_edges}
+    return {"receiver_pairs": _numba.receiver_pairs, "receiver_pairs_serial": _numba.receiver_pairs_serial,
+            "chain_side_planes": _numba.chain_side_planes, "reflection_pairs": _numba.reflection_pairs,
+            "chains_edges": _numba.chains_edges}
 
 
 def threads() -> int:
@@ -82,7 +89,7 @@ def in_threads(fn: Callable, items: list, n: int) -> Iterator:
 
 def warm_up() -> bool:
     """Compile every kernel now (numba caches them: once per machine), so that the first
-    query does not pay for it (about 10 s). ``scripts/setup.sh`` calls it. Returns whether
+    query does not pay for it (about 12 s). ``scripts/setup.sh`` calls it. Returns whether
     numba is installed."""
     if _compiled() is None:
         return False
@@ -135,14 +142,11 @@ def flat_beams(level, beams) -> dict:
     reads them (node levels concatenated), built once and kept in ``beams.flat``."""
     flat = beams.flat
     if not flat:
-        tree = beams.apex
-        flat["node_c"] = np.ascontiguousarray(np.concatenate(tree.centre))
-        flat["node_r"] = np.ascontiguousarray(np.concatenate(tree.radius))
+        flat["node_c"], flat["node_r"], flat["level_off"] = _tree_arrays(beams.apex)
         flat["through_c"] = np.ascontiguousarray(np.stack([np.concatenate(t.centre) for t in beams.through]))
         flat["through_r"] = np.ascontiguousarray(np.stack([np.concatenate(t.radius) for t in beams.through]))
         flat["last_image"] = np.ascontiguousarray(level.images[:, -1])
         flat["polys"] = np.ascontiguousarray(level.polygons, dtype=np.int64)
-        flat["level_off"] = np.concatenate([[0], np.cumsum([len(r) for r in tree.radius])]).astype(np.int64)
     return flat
 
 
