@@ -68,7 +68,7 @@ WAVEPATHS_SETTINGS = [
     ("R3+D2 prune 20 dB", 3, True, 2, {"prune_db": 20.0}),
     ("R3+D2", 3, True, 2),
 ]
-QUICK_SETTINGS = ("R1", "R2", "R0+D shadow", "R0+D", "R1+D", "R2+D", "R3+D1", "R3+D2 prune 20 dB")
+QUICK_SETTINGS = ("R1", "R2", "R0+D shadow", "R0+D", "R1+D", "R2+D", "R2+D1", "R3+D1", "R3+D2 prune 20 dB")
 
 
 def trace_options(setting: tuple):
