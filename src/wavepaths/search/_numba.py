@@ -208,7 +208,6 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
     n_items = items.shape[0]
     for t in range(t_centre.shape[0]):
         tc0, tc1, tc2, tr = t_centre[t, 0], t_centre[t, 1], t_centre[t, 2], t_radius[t]
-        top = 0
         stack_l[0] = 0
         stack_n[0] = 0
         top = 1
