@@ -189,6 +189,33 @@ def _beam_meets(a0, a1, a2, p0, p1, p2, pr, c0, c1, c2, cr, slack):
     return math.acos(min(max(cs, -1.0), 1.0)) <= half_p + half_q + slack
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _push_children(stack_l, stack_n, top, lvl, nd, level_off, branch):
+    # a SphereTree node's children onto the descent stack (the first child on top); returns the new top
+    n_next = level_off[lvl + 2] - level_off[lvl + 1]
+    for b in range(branch - 1, -1, -1):
+        child = nd * branch + b
+        if child < n_next:
+            stack_l[top] = lvl + 1
+            stack_n[top] = child
+            top += 1
+    return top
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _append_pair(out_a, out_b, cnt, a, b):
+    # append (a, b) to two growing int64 buffers (doubled when full); returns them and the new count
+    if cnt == out_a.shape[0]:
+        grow_a = np.empty(2 * cnt, np.int64)
+        grow_b = np.empty(2 * cnt, np.int64)
+        grow_a[:cnt] = out_a[:cnt]
+        grow_b[:cnt] = out_b[:cnt]
+        out_a, out_b = grow_a, grow_b
+    out_a[cnt] = a
+    out_b[cnt] = b
+    return out_a, out_b, cnt + 1
+
+
 @numba.njit(cache=True, nogil=True)
 def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, node_c, node_r, through_c,
                      through_r, level_off, leaf_size, branch, node_slack, last_image, polys, cen, rad, quads, normal,
@@ -197,9 +224,8 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
     # rectangle tests) and reflection_candidates' per-receiver point test, per target cluster
     depth = level_off.shape[0] - 1
     k = polys.shape[1]
-    cap = 1024
-    out_r = np.empty(cap, np.int64)
-    out_c = np.empty(cap, np.int64)
+    out_r = np.empty(1024, np.int64)
+    out_c = np.empty(1024, np.int64)
     cnt = 0
     stack_l = np.empty(depth * branch + 1, np.int64)
     stack_n = np.empty(depth * branch + 1, np.int64)
@@ -226,13 +252,7 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
             if not ok:
                 continue
             if lvl < depth - 1:
-                n_next = level_off[lvl + 2] - level_off[lvl + 1]
-                for b in range(branch - 1, -1, -1):
-                    child = nd * branch + b
-                    if child < n_next:
-                        stack_l[top] = lvl + 1
-                        stack_n[top] = child
-                        top += 1
+                top = _push_children(stack_l, stack_n, top, lvl, nd, level_off, branch)
                 continue
             for s in range(nd * leaf_size, min(nd * leaf_size + leaf_size, n_items)):
                 c = items[s]
@@ -276,16 +296,7 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
                                 break
                         if not inside:
                             continue
-                    if cnt == cap:
-                        cap *= 2
-                        grow_r = np.empty(cap, np.int64)
-                        grow_c = np.empty(cap, np.int64)
-                        grow_r[:cnt] = out_r[:cnt]
-                        grow_c[:cnt] = out_c[:cnt]
-                        out_r, out_c = grow_r, grow_c
-                    out_r[cnt] = r
-                    out_c[cnt] = c
-                    cnt += 1
+                    out_r, out_c, cnt = _append_pair(out_r, out_c, cnt, r, c)
     return out_r[:cnt], out_c[:cnt]
 
 
@@ -299,9 +310,8 @@ def chains_edges(apex, polys, p_centre, p_radius, normal, offset, quads, items, 
     m, k = polys.shape
     depth = level_off.shape[0] - 1
     n_items = items.shape[0]
-    cap = 1024
-    out_c = np.empty(cap, np.int64)
-    out_e = np.empty(cap, np.int64)
+    out_c = np.empty(1024, np.int64)
+    out_e = np.empty(1024, np.int64)
     cnt = 0
     stack_l = np.empty(depth * branch + 1, np.int64)
     stack_n = np.empty(depth * branch + 1, np.int64)
@@ -356,13 +366,7 @@ def chains_edges(apex, polys, p_centre, p_radius, normal, offset, quads, items, 
             if not ok:
                 continue
             if lvl < depth - 1:
-                n_next = level_off[lvl + 2] - level_off[lvl + 1]
-                for b in range(branch - 1, -1, -1):
-                    child = nd * branch + b
-                    if child < n_next:
-                        stack_l[top] = lvl + 1
-                        stack_n[top] = child
-                        top += 1
+                top = _push_children(stack_l, stack_n, top, lvl, nd, level_off, branch)
                 continue
             for s in range(nd * leaf_size, min(nd * leaf_size + leaf_size, n_items)):
                 e = items[s]
@@ -390,14 +394,5 @@ def chains_edges(apex, polys, p_centre, p_radius, normal, offset, quads, items, 
                         break
                 if not ok:
                     continue
-                if cnt == cap:
-                    cap *= 2
-                    grow_c = np.empty(cap, np.int64)
-                    grow_e = np.empty(cap, np.int64)
-                    grow_c[:cnt] = out_c[:cnt]
-                    grow_e[:cnt] = out_e[:cnt]
-                    out_c, out_e = grow_c, grow_e
-                out_c[cnt] = ci
-                out_e[cnt] = e
-                cnt += 1
+                out_c, out_e, cnt = _append_pair(out_c, out_e, cnt, ci, e)
     return out_c[:cnt], out_e[:cnt]

@@ -792,8 +792,9 @@ def chains_meeting_edges(
         # the same tests compiled (kernels.chains_meeting_edges), blocks of chains on threads
         blocks = [np.arange(s0, min(len(level), s0 + chunk), dtype=np.int64) for s0 in range(0, len(level), chunk)]
         nt = kernels.threads() if len(level) * len(tree) >= kernels.PARALLEL_MIN_PAIRS else 1
-        for ch, e in kernels.in_threads(lambda rows: kernels.chains_meeting_edges(scene, level, apertures, tree, rows),
-                                        blocks, nt):
+        flat = kernels.tree_arrays(tree)
+        for ch, e in kernels.in_threads(
+                lambda rows: kernels.chains_meeting_edges(scene, level, apertures, tree, rows, flat), blocks, nt):
             if len(ch):
                 yield ch, e
         return

@@ -142,7 +142,7 @@ def flat_beams(level, beams) -> dict:
     reads them (node levels concatenated), built once and kept in ``beams.flat``."""
     flat = beams.flat
     if not flat:
-        flat["node_c"], flat["node_r"], flat["level_off"] = _tree_arrays(beams.apex)
+        flat["node_c"], flat["node_r"], flat["level_off"] = tree_arrays(beams.apex)
         flat["through_c"] = np.ascontiguousarray(np.stack([np.concatenate(t.centre) for t in beams.through]))
         flat["through_r"] = np.ascontiguousarray(np.stack([np.concatenate(t.radius) for t in beams.through]))
         flat["last_image"] = np.ascontiguousarray(level.images[:, -1])
@@ -195,7 +195,8 @@ def reflection_pairs(scene, level, beams, apertures, clusters, rx: np.ndarray, f
     )
 
 
-def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray,
+                         tree_flat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(chain, dihedron) pairs of chains ``rows`` of ``level`` (order >= 1) whose last leg can end on the edge.
 
     The compiled :func:`wavepaths.search.beams.chains_meeting_edges` for one block of
@@ -203,6 +204,8 @@ def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray) -> tup
     beams through its apertures' rectangles), one descent of the edge tree ``tree`` with the
     same node test, then per edge the segment test on the planes and the cones through the
     apertures' spheres; the same margins.
+
+    ``tree_flat``: :func:`tree_arrays` of ``tree``, when the caller queries it block by block.
 
     Returns
     -------
@@ -212,7 +215,8 @@ def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray) -> tup
         The tree's items (dihedron ids).
     """
     c = np.ascontiguousarray
-    tree_flat = _tree_arrays(tree)
+    if tree_flat is None:
+        tree_flat = tree_arrays(tree)
     dih = scene.dihedra
     ci, e = _compiled()["chains_edges"](
         c(level.last[rows]), c(level.polygons[rows], dtype=np.int64), c(apertures.centre), c(apertures.radius),
@@ -223,7 +227,7 @@ def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray) -> tup
     return rows[ci], e
 
 
-def _tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A :class:`~wavepaths.search.beams.SphereTree`'s node levels concatenated: centres
     (N, 3), radii (N,) and each level's first node (depth + 1,)."""
     return (np.ascontiguousarray(np.concatenate(tree.centre)), np.ascontiguousarray(np.concatenate(tree.radius)),

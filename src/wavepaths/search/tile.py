@@ -340,6 +340,17 @@ def _receiver_side_by_tree(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_
     return _kept_pairs_end_side(scene, ctx, rx_lv, e, d, window, stats, tag)
 
 
+def _last_mirror_planes(scene: "Scene", rx_lv: ImageLevel, e_rows: np.ndarray):
+    """For the mirror-side test: the last mirrors' unit normals ``n`` (E, 3) and offsets ``off``
+    (E,) on coordinates recentred on the scene centre, the side ``side`` (E,) of the previous
+    image, and the plane tolerance [m]."""
+    c0 = scene.center
+    q = rx_lv.polygons[e_rows, -1]
+    n, off = scene.polygon_normal[q], scene.polygon_offset[q] - scene.polygon_normal[q] @ c0
+    side = np.sign(np.einsum("ij,ij->i", rx_lv.images[e_rows, -2] - c0, n) - off)
+    return n, off, side, scene.length_tolerance(scene.tolerances.plane_distance)
+
+
 def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
                    stats: Counter, tag: str, window=None) -> _EndSide:
     """Step 1 of :func:`diffraction_tile`, dense over (receiver images ``e_rows``) x (dihedra ``diffr``).
@@ -372,10 +383,7 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     ok = np.ones((len(e_rows), len(diffr)), dtype=bool)
     disabled = ctx.options.disable_culling
     if rx_lv.order >= 1 and "receiver_mirror_side" not in disabled:
-        q = rx_lv.polygons[e_rows, -1]
-        n, off = scene.polygon_normal[q], scene.polygon_offset[q] - scene.polygon_normal[q] @ c0
-        side = np.sign(np.einsum("ij,ij->i", rx_lv.images[e_rows, -2] - c0, n) - off)
-        tol = scene.length_tolerance(scene.tolerances.plane_distance)
+        n, off, side, tol = _last_mirror_planes(scene, rx_lv, e_rows)
         sa = side[:, None] * (n @ A.T - off[:, None])
         sb = side[:, None] * (n @ (A + L[:, None] * w).T - off[:, None])
         reach = np.maximum(sa, sb) > -tol
@@ -434,9 +442,7 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
     if rx_lv.order >= 1:
         q = rx_lv.polygons[e_rows, -1]
         if "receiver_mirror_side" not in disabled:
-            n, off = scene.polygon_normal[q], scene.polygon_offset[q] - scene.polygon_normal[q] @ c0
-            side = np.sign(np.einsum("ij,ij->i", rx_lv.images[e_rows, -2] - c0, n) - off)
-            mirror = (n, off, side, scene.length_tolerance(scene.tolerances.plane_distance))
+            mirror = _last_mirror_planes(scene, rx_lv, e_rows)
         if "receiver_beam" not in disabled:
             centre, radius = scene.polygon_spheres
             to_q = centre[q] - c0 - I
