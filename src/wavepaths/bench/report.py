@@ -401,6 +401,13 @@ interleaved round by round, and reported as medians over the rounds.</p>
                                    "paths", "largest counters", "error"]))
         if sc.get("analysis"):
             parts.append(f"<p>{html.escape(sc['analysis'])}</p>")
+        oc = sc.get("occlusion")
+        if oc and "ns_per_segment" in oc:
+            parts.append(f"<p>Occlusion (Embree, each hit decided in float64): {oc['segments']:,} legs of "
+                         f"simple_street_canyon ({oc['blocked_fraction']:.0%} blocked), ns per segment.</p>")
+            parts.append(_table([[k, v] for k, v in oc["ns_per_segment"].items()]
+                                + [["speed-up", oc.get("speedup")], ["same verdicts", oc.get("same_verdicts")]],
+                                ["set-up and confirmation", "ns per segment"]))
 
     dc = res.get("diffraction_cost")
     if dc:

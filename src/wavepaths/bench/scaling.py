@@ -18,7 +18,10 @@ Sweeps:
 * triangles and dihedra: squares of growing size cut from Sionna's ``etoile``
   (:func:`wavepaths.bench.scenes.crop_objects`), 100 receivers, first order
   (reflections and diffraction without reflections), and the default options where
-  they finish in time.
+  they finish in time;
+* occlusion: nanoseconds per segment of the Embree caster, with its compiled set-up and
+  confirmation and with the numpy reference, interleaved in one process
+  (:func:`occlusion_rates`).
 """
 
 from __future__ import annotations
@@ -61,6 +64,37 @@ def scaling_point(xml: str, tx, rx, options: dict, measure_memory: bool = True, 
             "dihedra": info["dihedra"], "diffracting_dihedra": info["diffracting_dihedra"],
             "num_rx": int(len(rx)), "options": options,
             "stats": {k: int(v) for k, v in paths.stats.items()}}
+
+
+def occlusion_rates(xml: str, n: int = 200_000, rounds: int = 3) -> dict:
+    """ns per segment of :meth:`EmbreeRayCaster.occluded`, compiled against numpy (one process).
+
+    The segments are the search's kind: from a random point on a random face of the scene
+    to a random point of its box at 1.5 m height (a leg to a receiver). Both casters are
+    timed in alternation, ``rounds`` times, on the same segments; their verdicts are
+    compared (``same_verdicts``).
+    """
+    from ..raycast.embree import EmbreeRayCaster, _compiled
+    from ..scene import load_scene
+    from .timing import interleaved
+
+    scene = load_scene(xml)
+    rng = np.random.default_rng(0)
+    tri = scene.vertices[scene.triangles[rng.integers(0, len(scene.triangles), n)]]
+    a = np.einsum("ki,kij->kj", rng.dirichlet([1, 1, 1], n), tri)
+    lo, hi = scene.bounds
+    b = np.column_stack([rng.uniform(lo[0], hi[0], n), rng.uniform(lo[1], hi[1], n), np.full(n, 1.5)])
+    casters = {"numpy": EmbreeRayCaster(scene, compiled=False)}
+    if _compiled() is not None:
+        casters["compiled"] = EmbreeRayCaster(scene, compiled=True)
+    verdicts = {k: c.occluded(a, b) for k, c in casters.items()}  # warm-up (and the kernels' compilation)
+    times = interleaved({k: (lambda c=c: c.occluded(a, b)) for k, c in casters.items()}, rounds)
+    out = {"segments": n, "blocked_fraction": float(verdicts["numpy"].mean()),
+           "ns_per_segment": {k: t.median_s / n * 1e9 for k, t in times.items()}}
+    if "compiled" in casters:
+        out["speedup"] = times["numpy"].median_s / times["compiled"].median_s
+        out["same_verdicts"] = bool((verdicts["numpy"] == verdicts["compiled"]).all())
+    return out
 
 
 def _point(xml, tx, rx, options, timeout_s, memory_limit) -> dict:
@@ -123,6 +157,11 @@ def run_scaling(out_dir: str, quick: bool = False, timeout_s: float = 300.0, mem
         rows.append(_point(xml, STREET_CANYON_TX, rx, {"max_reflections": 3, "diffraction": True,
                                                         "diffraction_reflections": b}, timeout_s, memory_limit))
     out["order"] = {"scene": "simple_street_canyon", "num_rx": 100, "points": rows}
+
+    progress("benchmark 4: occlusion, compiled against numpy")
+    r = run_isolated("wavepaths.bench.scaling", "occlusion_rates", {"xml": xml, "n": 50_000 if quick else 200_000},
+                     timeout_s=timeout_s, memory_limit_bytes=memory_limit)
+    out["occlusion"] = dict(r["result"]) if r["ok"] else {"error": r.get("error")}
 
     progress("benchmark 4: triangles and dihedra (etoile crops)")
     from ..scene import load_scene, write_mitsuba_xml

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -13,6 +14,16 @@ from .numpy_caster import ExactSegments
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
+
+
+@lru_cache(maxsize=1)
+def _compiled():
+    """The compiled set-up and confirmation kernels, or ``None`` when numba is not installed."""
+    try:
+        from . import _numba
+    except ImportError:
+        return None
+    return _numba
 
 
 class EmbreeRayCaster:
@@ -44,10 +55,18 @@ class EmbreeRayCaster:
 
     No end is pulled in or lifted: a face within any distance of an end point is seen
     (down to float32 resolution), and an end lying on a face does not hit it.
+
+    ``compiled``: with numba installed (``None``, the default, or ``True``) the work
+    around each Embree call (steps 1-3, and the float64 test of each hit) runs as one
+    compiled pass per ray (:mod:`wavepaths.raycast._numba`) instead of a dozen numpy
+    passes; ``False`` runs the numpy reference. Both decide by the same float64 rule.
     """
 
-    def __init__(self, scene: "Scene", batch: int = 1 << 20) -> None:
+    def __init__(self, scene: "Scene", batch: int = 1 << 20, compiled: bool | None = None) -> None:
         self._center = scene.center.copy()
+        self._kernels = _compiled() if compiled is not False else None
+        if compiled and self._kernels is None:
+            raise ImportError("EmbreeRayCaster(compiled=True) needs numba (pip install 'wavepaths[fast]')")
         self._exact = ExactSegments(scene)
         self._batch = batch
         lo, hi = scene.bounds - self._center
@@ -91,6 +110,8 @@ class EmbreeRayCaster:
         blocked = np.zeros(k, dtype=bool)
         if k == 0:
             return blocked
+        if self._kernels is not None:
+            return self._occluded_compiled(a, b)
         a, b, _ = canonical(a - self._center, b - self._center)
         d = b - a
         uncertain = np.zeros(k, dtype=bool)
@@ -110,6 +131,44 @@ class EmbreeRayCaster:
         if len(rest):
             self.exact_fallbacks += len(rest)
             blocked[rest] = self._exact.blocked(a[rest], b[rest])
+        return blocked
+
+    def _occluded_compiled(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """:meth:`occluded` with the set-up and the float64 confirmation compiled (same steps)."""
+        K, ex = self._kernels, self._exact
+        A, B, live = K.canonical_recentred(np.ascontiguousarray(a), np.ascontiguousarray(b), self._center)
+        k = len(A)
+        blocked = np.zeros(k, dtype=bool)
+        uncertain = np.zeros(k, dtype=bool)
+        todo = np.nonzero(live)[0]
+        for second in (False, True):
+            sel = todo[~blocked[todo] & ~uncertain[todo]] if second else todo
+            if len(sel) == 0:
+                break
+            rows, start, unit, span = K.half_rays(A, B, sel, second, self._lo, self._hi)
+            prim = np.full(len(rows), -1, dtype=np.int32)
+            for s in range(0, len(rows), self._batch):
+                prim[s : s + self._batch] = self._scene.run(
+                    start[s : s + self._batch], unit[s : s + self._batch], dists=span[s : s + self._batch],
+                    query="INTERSECT")
+            self._rays += len(rows)
+            hit = prim >= 0
+            seg, p = sel[rows[hit]], prim[hit].astype(np.int64)
+            verdict = K.confirm_hits(A, B, seg, p, second, ex.normal, ex.offset, ex.tol, ex.inward,
+                                     ex.inward_offset, ex.edge_tol)
+            blocked[seg[verdict == 1]] = True
+            uncertain[seg[verdict == 2]] = True
+            near = verdict == 3  # a crossing next to a face's edge: the numpy test, with its graze check
+            if near.any():
+                s3, p3 = seg[near], p[near]
+                confirmed = ex.crosses(A[s3], B[s3], p3)
+                blocked[s3[confirmed]] = True
+                s3, p3 = s3[~confirmed], p3[~confirmed]
+                uncertain[s3[~ex.in_plane((A if second else B)[s3], p3)]] = True
+        rest = np.nonzero(uncertain & ~blocked)[0]
+        if len(rest):
+            self.exact_fallbacks += len(rest)
+            blocked[rest] = ex.blocked(A[rest], B[rest])
         return blocked
 
     def _nearest(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
