@@ -91,3 +91,19 @@ def test_large_gain_differences_are_counted_by_reason_and_band():
     assert out["by_reason"] == {"sionna-dr-depends-on-max-depth": {"6-20 dB": 1, "> 20 dB": 0},
                                 "unexplained": {"6-20 dB": 1, "> 20 dB": 1}}
     assert [e["rx"] for e in out["unexplained_examples"]] == [1, 2]
+
+
+def test_diffraction_cost_benchmark_reports_per_path_costs():
+    """Benchmark 5 (quick): diffraction adds paths and removes none (the same line-of-sight
+    and reflected paths in every cell), and the time ratio splits into the paths ratio and
+    the per-path costs: t_on / t_off = 1 + (us per diffracted path x diffracted paths) /
+    (us per path off x paths off)."""
+    from wavepaths.bench.diffraction_cost import run_diffraction_cost
+
+    r = run_diffraction_cost(quick=True, progress=lambda m: None)
+    p = r["pairs"][0]
+    assert p["same_geometrical_optics_paths"]
+    assert p["diffracted_paths"] > 0 and p["paths_ratio"] > 1
+    off_paths = p["all_paths"] - p["diffracted_paths"]
+    rebuilt = 1 + p["us_per_diffracted_path"] * p["diffracted_paths"] / (p["us_per_path_off"] * off_paths)
+    assert abs(rebuilt - p["ratio"]) < 1e-9 * p["ratio"]

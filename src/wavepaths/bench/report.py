@@ -415,8 +415,10 @@ interleaved round by round, and reported as medians over the rounds.</p>
         parts.append(f"<p>Coverage map of simple_street_canyon, {dc['grid_shape'][0]} x {dc['grid_shape'][1]} cells of "
                      f"{dc['cell_size_m']:g} m; the seed paid {dc['seed_ratio']:g}x. Headline: {dc['headline_pair']}.</p>")
         parts.append(_table([[f"{p['off']} / {p['on']}", p["off_s"]["median_s"], p["on_s"]["median_s"], p["ratio"],
-                              p["diffracted_paths"], p["all_paths"]] for p in dc["pairs"]],
-                            ["pair", "off [s]", "on [s]", "ratio", "diffracted paths (on)", "all paths (on)"]))
+                              p["diffracted_paths"], p["all_paths"], p.get("paths_ratio"), p.get("us_per_path_off"),
+                              p.get("us_per_diffracted_path")] for p in dc["pairs"]],
+                            ["pair", "off [s]", "on [s]", "ratio", "diffracted paths (on)", "all paths (on)",
+                             "paths on / off", "us per path (off)", "us per diffracted path (added)"]))
         parts.append(_img(summary["figures"].get("diffraction_cost")))
 
     sk = res.get("skips")
