@@ -213,3 +213,48 @@ def test_prune_tolerance_drops_only_weak_reflections_and_respects_its_bound(prun
     p_kept = pa.path_gain(coherent=False)[0] / fs**2
     n_drop = np.bincount(full.rx_index[dropped], minlength=len(rx))
     assert (p_full - p_kept <= n_drop * 10 ** (-prune_db / 10) * (1 + 1e-9)).all()
+
+
+@pytest.mark.parametrize("prune_db", [10.0, 25.0])
+def test_prune_tolerance_drops_only_weak_diffracted_paths_and_respects_its_bound(prune_db):
+    """With ``prune_frequency_hz``, diffracted paths (with reflections around them) are pruned
+    too: every dropped path is at least ``prune_db`` below free space at the receiver's
+    direct distance (at the pruning frequency and above), no kept path changes, and the
+    power-sum change per receiver stays within the stated bound."""
+    from wavepaths.fields import FieldConfig, compute_fields
+
+    s = load_scene("street_canyon")
+    tx = np.array([[-60.0, 0.0, 10.0]])
+    rx = np.concatenate([np.stack([np.linspace(-80, 80, 17), np.full(17, 2.0), np.full(17, 1.5)], axis=1),
+                         np.stack([np.linspace(-80, 80, 9), np.full(9, 30.0), np.full(9, 1.5)], axis=1)])
+    base = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=1)
+    full = trace(s, tx, rx, base)
+    pruned = trace(s, tx, rx, base.with_(prune_db=prune_db, prune_frequency_hz=3.5e9))
+    refl_only = trace(s, tx, rx, base.with_(prune_db=prune_db))  # no frequency: diffraction kept
+    key = lambda p, i: (int(p.rx_index[i]), tuple(p.interactions[i, : p.depth[i]].tolist()),
+                        tuple(p.primitive[i, : p.depth[i]].tolist()))
+    kept = {key(pruned, i) for i in range(len(pruned))}
+    dropped = [i for i in range(len(full)) if key(full, i) not in kept]
+    assert len(kept) == len(pruned) and kept <= {key(full, i) for i in range(len(full))}
+    is_diff = (full.interactions == InteractionType.DIFFRACTION).any(axis=1)
+    assert is_diff[dropped].sum() > 0.3 * is_diff.sum()  # most diffracted paths here are weak
+    assert len(dropped) <= pruned.stats["pruned_paths_upper_bound"]
+    kept_r = {key(refl_only, i) for i in range(len(refl_only))}
+    assert all(key(full, i) in kept_r for i in np.nonzero(is_diff)[0])
+    for f_hz in (3.5e9, 9.5e9):  # the bound holds at the pruning frequency and above
+        cfg = FieldConfig(f_hz)
+        fa, pa = compute_fields(s, full, cfg), compute_fields(s, pruned, cfg)
+        fs = cfg.wavelength / (4 * np.pi * np.linalg.norm(rx - tx, axis=1))
+        amp = np.abs(fa.a).reshape(len(full), -1).max(axis=1)
+        assert (amp[dropped] <= 10 ** (-prune_db / 20) * fs[full.rx_index[dropped]] * (1 + 1e-12)).all()
+        p_full = fa.path_gain(coherent=False)[0] / fs**2
+        p_kept = pa.path_gain(coherent=False)[0] / fs**2
+        n_drop = np.bincount(full.rx_index[dropped], minlength=len(rx))
+        assert (p_full - p_kept <= n_drop * 10 ** (-prune_db / 10) * (1 + 1e-9)).all()
+
+
+def test_prune_frequency_must_be_a_positive_frequency():
+    with pytest.raises(WavepathsError, match="prune_frequency_hz"):
+        TraceOptions(prune_db=10.0, prune_frequency_hz=0.0)
+    with pytest.raises(WavepathsError, match="prune_frequency_hz"):
+        TraceOptions(prune_db=10.0, prune_frequency_hz=float("nan"))

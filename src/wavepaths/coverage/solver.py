@@ -212,7 +212,9 @@ def coverage(
         Where to evaluate: cell centres are the receivers.
     options : TraceOptions, optional
         What to trace (default: line of sight, reflections to order 2, first-order
-        diffraction with one reflection).
+        diffraction with one reflection). With ``prune_db`` and the default UTD model,
+        ``prune_frequency_hz`` is set to ``fields.frequency_hz`` when not given, so that
+        diffracted paths are pruned by their bound too.
     fields : FieldConfig, optional
         Frequency, diffraction model, antennas, transmit power.
     settings : CoverageOptions, optional
@@ -242,6 +244,10 @@ def coverage(
     cfg = fields or FieldConfig()
     cov = settings or CoverageOptions()
     _check_types(scene, grid, opts, cfg, cov)
+    if (opts.prune_db is not None and opts.prune_frequency_hz is None and cfg.model == "utd"
+            and cfg.compat == "none"):
+        # the diffraction bound of prune_db needs the frequency, which the map knows
+        opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
     tx = check_positions("tx", tx)
     _check_materials(scene, cfg)
     m = len(tx)

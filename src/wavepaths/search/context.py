@@ -150,15 +150,29 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
         for a in range(options.diffraction_reflections + 1):
             lv = levels[a]
             tested = 0
-            kept_c, kept_d, kept_s = [], [], []
+            kept_c, kept_d, kept_s, kept_lo, kept_hi = [], [], [], [], []
             cull = "source_beam" not in options.disable_culling
+            windows = a >= 1 and "aperture_window" not in options.disable_culling
+            culled_aperture = 0
+            # block by block, each block's survivors of every test kept before the next block:
+            # the pairs that meet the beams can outnumber the survivors by far (munich, order 2:
+            # 68.7 M pairs would not fit in memory at once)
             for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, cull, options.compiled):
                 tested += len(c)
                 sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
                 keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-                kept_c.append(c[keep])
-                kept_d.append(d[keep])
-                kept_s.append(sec[keep])
+                c, d, sec = c[keep], d[keep], sec[keep]
+                if windows:
+                    # the incident leg leaves the last mirror: only where it can cross that mirror
+                    lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
+                    reach = lo <= hi
+                    culled_aperture += int((~reach).sum())
+                    c, d, sec = c[reach], d[reach], sec[reach]
+                    kept_lo.append(lo[reach])
+                    kept_hi.append(hi[reach])
+                kept_c.append(c)
+                kept_d.append(d)
+                kept_s.append(sec)
             c, d, sec = (np.concatenate(x) if x else np.zeros(0, np.int64) for x in (kept_c, kept_d, kept_s))
             stats[f"diffraction_sources_order_{a}_considered"] = len(lv) * len(diffracting)
             stats[f"diffraction_sources_order_{a}_culled_beam"] = len(lv) * len(diffracting) - tested
@@ -170,14 +184,11 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
                 stats["diffraction_sources_order_0_culled_hidden"] = int((~seen).sum())
                 stats["visibility_rays"] = vis.rays
                 c, d, sec, vis = c[seen], d[seen], sec[seen], vis.take(np.nonzero(seen)[0])
-            elif a >= 1 and "aperture_window" not in options.disable_culling:
-                # the incident leg leaves the last mirror: only where it can cross that mirror
-                lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
-                reach = lo <= hi
-                stats[f"diffraction_sources_order_{a}_culled_aperture"] = int((~reach).sum())
-                none = np.zeros(int(reach.sum()), dtype=bool)
-                c, d, sec = c[reach], d[reach], sec[reach]
-                vis = VisibilityWindows(lo[reach], hi[reach], none, none, scene.length_tolerance(1e-9), 0, 0)
+            elif windows:
+                stats[f"diffraction_sources_order_{a}_culled_aperture"] = culled_aperture
+                lo, hi = (np.concatenate(x) if x else np.zeros(0) for x in (kept_lo, kept_hi))
+                none = np.zeros(len(c), dtype=bool)
+                vis = VisibilityWindows(lo, hi, none, none, scene.length_tolerance(1e-9), 0, 0)
             stats[f"diffraction_sources_order_{a}_kept"] = int(len(c))
             key = d * stride + sec
             o = np.lexsort((c, key))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from ..errors import WavepathsError
 
 
@@ -72,6 +74,16 @@ class TraceOptions:
         peak gains). The dropped paths are counted in ``stats`` (``pruned_paths``); their
         total power changes the power-sum path gain relative to free space by at most
         ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
+        Diffracted paths are pruned too when ``prune_frequency_hz`` is given, by the
+        bound of :func:`wavepaths.search.tile._weak_diffraction` (UTD with passive faces,
+        :func:`wavepaths.em.utd.utd_magnitude_bound`), counted in the same
+        ``pruned_paths_upper_bound``.
+    prune_frequency_hz : float or None
+        The lowest frequency [Hz] the fields of these paths will be computed at, for the
+        diffraction bound of ``prune_db`` (lower frequencies diffract more; the bound holds
+        at every frequency above). :func:`wavepaths.coverage.coverage` fills it in from its
+        field settings when they use the default UTD model. ``None``: diffracted paths are
+        never pruned.
     disable_culling : frozenset of str
         Conservative culling tests to switch off, for measuring what each one saves
         (``wavepaths bench``'s skip benchmark); every name in :data:`CULLING_TESTS`. They
@@ -90,6 +102,7 @@ class TraceOptions:
     skip_absorbers: bool = True
     rx_batch: int = 256
     prune_db: float | None = None
+    prune_frequency_hz: float | None = None
     disable_culling: frozenset = frozenset()
     compiled: bool = True
 
@@ -100,6 +113,9 @@ class TraceOptions:
             raise WavepathsError(f"unknown culling tests {sorted(unknown)}; known: {sorted(CULLING_TESTS)}")
         if self.prune_db is not None and not self.prune_db > 0:
             raise WavepathsError(f"`prune_db` must be positive or None, got {self.prune_db}")
+        if self.prune_frequency_hz is not None and not (np.isfinite(self.prune_frequency_hz)
+                                                        and self.prune_frequency_hz > 0):
+            raise WavepathsError(f"`prune_frequency_hz` must be a positive frequency or None, got {self.prune_frequency_hz}")
         if not 0 <= self.max_reflections <= 6:
             raise WavepathsError(f"`max_reflections` must be in 0..6, got {self.max_reflections}")
         if not 0 <= self.diffraction_reflections <= 4:

@@ -564,6 +564,38 @@ def diffraction_tile(
     return out
 
 
+def _weak_diffraction(ctx: TxContext, rx: np.ndarray, tx_lv: ImageLevel, rx_lv: ImageLevel, c: np.ndarray,
+                      e: np.ndarray, phi: np.ndarray, phi_prime: np.ndarray, n: np.ndarray, te: np.ndarray,
+                      de: np.ndarray, tr: np.ndarray, dr: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(k,) bool: diffracted candidates that a stated bound puts ``prune_db`` below free space.
+
+    The bound (:attr:`TraceOptions.prune_db`): with passive reflections (``|Gamma| <= 1``)
+    before and after the edge, the field at the receiver is at most
+    ``|D| / sqrt(s s' (s + s'))`` for a unit spherical source (UTD, spherical incidence;
+    ``s'``, ``s`` the unfolded lengths before and after the edge, from the images' reduced
+    coordinates: ``s' = hypot(t_e - t, d_e)``, ``s = hypot(t_r - t, d_r)``), and ``|D|`` at
+    most :func:`~wavepaths.em.utd.utd_magnitude_bound` at the lowest frequency the fields
+    will use (``prune_frequency_hz``; the bound does not grow with frequency). Free space
+    gives ``1 / |rx - tx|``. A candidate whose ratio is below ``10^(-prune_db / 20)``, with
+    a 1 % margin for the rounding between the search's angles and the fields', is weak.
+    """
+    from ..em.utd import utd_magnitude_bound
+    from ..fields.chain import SIN_BETA_0_FLOOR
+    from .paths import SPEED_OF_LIGHT
+
+    opts = ctx.options
+    k = 2.0 * np.pi * opts.prune_frequency_hz / SPEED_OF_LIGHT
+    s_in = np.hypot(te - t, de)
+    s_out = np.hypot(tr - t, dr)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sin_b = np.maximum(de / s_in, SIN_BETA_0_FLOOR)
+        L = s_in * s_out / (s_in + s_out) * sin_b**2
+        bound = utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L)
+        direct = np.linalg.norm(rx[rx_lv.source[e]] - ctx.tx[tx_lv.source[c]], axis=1)
+        ratio = bound * direct / np.sqrt(s_in * s_out * (s_in + s_out))
+    return np.isfinite(ratio) & (1.01 * ratio < 10 ** (-opts.prune_db / 20))
+
+
 def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
                             rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray) -> list[PathBatch]:
     """Steps 3-5 of :func:`diffraction_tile` on joined candidates (receiver side ``rside[rows]``,
@@ -606,6 +638,10 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
         grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
         stats["pairs_on_boundaries"] += int(near.sum())
     e, d, sec, c, t = e[ok], d[ok], sec[ok], c[ok], t[ok]
+    weak = None
+    if ctx.options.prune_db is not None and ctx.options.prune_frequency_hz is not None:
+        weak = _weak_diffraction(ctx, rx, tx_lv, rx_lv, c, e, phi[ok], phi_prime[ok], wedge[ok] / np.pi,
+                                 te[on][ok], de[on][ok], tr[on][ok], dr[on][ok], t)
     P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
     # reflections after (receiver images) and before (transmitter images)
     ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
@@ -614,6 +650,14 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     e, d, sec, c, P, post = e[ok1], d[ok1], sec[ok1], c[ok1], P[ok1], post[ok1]
     stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
     stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
+    if weak is not None:
+        # pruned after the back-traces, so that the count bounds the paths dropped (not the
+        # candidates): before the casts and the fields, which cost the most per path
+        weak = weak[ok2][ok1]
+        stats["pruned_paths_upper_bound"] += int(weak.sum())
+        stats[f"{tag}_pruned_candidates"] += int(weak.sum())
+        keep = ~weak
+        e, d, sec, c, P, pre, post = e[keep], d[keep], sec[keep], c[keep], P[keep], pre[keep], post[keep]
     # the true dihedron: the faces bounding the sector (seed §3.3)
     f0 = ctx.sectors.face[d, sec]
     fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
