@@ -47,10 +47,9 @@ def _trace_options(args):
     from .search import TraceOptions
 
     # the diffraction bound of --prune-db needs the frequency the fields are computed at
-    # (the default UTD model only; see TraceOptions.prune_frequency_hz)
+    # (the UTD model, textbook or Sionna compat; see TraceOptions.prune_frequency_hz)
     prune_f = None
-    if (args.prune_db is not None and getattr(args, "frequency", None) is not None
-            and getattr(args, "model", "utd") == "utd" and getattr(args, "compat", "none") == "none"):
+    if args.prune_db is not None and getattr(args, "frequency", None) is not None and getattr(args, "model", "utd") == "utd":
         prune_f = args.frequency
     return TraceOptions(
         los=not args.no_los,
@@ -60,6 +59,7 @@ def _trace_options(args):
         lit_region=not args.no_lit_region,
         prune_db=args.prune_db,
         prune_frequency_hz=prune_f,
+        tolerance_db=getattr(args, "tolerance_db", None),
     )
 
 

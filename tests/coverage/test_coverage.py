@@ -283,3 +283,58 @@ def test_automatic_tile_size_bounds_the_receiver_images_a_tile_holds(canyon, mon
     fixed = coverage(canyon, tx, grid, TraceOptions(max_reflections=1), settings=IN_PROCESS)
     assert auto.timings["tile_size"] == 1024
     np.testing.assert_allclose(auto.path_gain(), fixed.path_gain(), rtol=RTOL)
+
+
+def test_prune_db_prunes_diffraction_at_the_maps_frequency_with_utd_only(canyon, canyon_map):
+    """coverage() gives prune_db the map's frequency for the UTD model: fewer diffracted
+    paths, and no cell gains power (only paths are dropped; their bound is tested per path
+    in tests/search); with GTD (no stated bound) every diffracted path stays."""
+    tx = [[-60, 0, 10], [-20, 4, 6]]
+    opts = TraceOptions(prune_db=15.0)
+    pruned = coverage(canyon, tx, canyon_grid(), opts, settings=IN_PROCESS)
+    full_d = np.nansum(canyon_map.num_paths[2])
+    assert 0 < np.nansum(pruned.num_paths[2]) < 0.7 * full_d
+    assert pruned.stats["pruned_paths_upper_bound"] > 0
+    ok = ~canyon_map.inside
+    assert np.all(pruned.power_sum[..., ok] <= canyon_map.power_sum[..., ok] * (1 + 1e-9))
+    gtd = FieldConfig(model="gtd")
+    full_gtd = coverage(canyon, tx, canyon_grid(), TraceOptions(), fields=gtd, settings=IN_PROCESS)
+    pruned_gtd = coverage(canyon, tx, canyon_grid(), opts, fields=gtd, settings=IN_PROCESS)
+    assert np.nansum(pruned_gtd.num_paths[2]) == np.nansum(full_gtd.num_paths[2]) == full_d
+
+
+@pytest.mark.parametrize("antenna", ["iso", "tr38901"])
+def test_tolerance_db_changes_no_cells_power_sum_by_more_than_the_tolerance(canyon, antenna):
+    """tolerance_db drops diffracted contributions (fewer diffracted paths) and every cell's
+    power-sum path gain stays within the tolerance of the full map's, also with a directive
+    antenna (whose peak gain the bound includes); cells that only diffraction reaches keep
+    every path."""
+    from wavepaths.em.antennas import Antenna
+
+    tx = [[-60, 0, 10], [-20, 4, 6]]
+    cfg = FieldConfig(3.5e9, tx_antenna=Antenna(antenna, "V"))
+    grid = PlanarGrid(center=[-37.3, 2.2], size=[112, 100], cell_size=[3.5, 2.5], height=1.5)
+    full = coverage(canyon, tx, grid, TraceOptions(), fields=cfg, settings=IN_PROCESS)
+    for tol in (0.1, 1.0):
+        cut = coverage(canyon, tx, grid, TraceOptions(tolerance_db=tol), fields=cfg, settings=IN_PROCESS)
+        assert np.nansum(cut.num_paths[2]) < 0.8 * np.nansum(full.num_paths[2])
+        assert cut.stats["tolerance_dropped_candidates"] > 0
+        ok = ~full.inside
+        p_full, p_cut = full.power_sum.sum(axis=0)[:, ok], cut.power_sum.sum(axis=0)[:, ok]  # (m, cells)
+        assert (p_cut <= p_full * (1 + 1e-12)).all()
+        reached = p_full > 0
+        change_db = 10 * np.log10(p_full[reached] / np.maximum(p_cut[reached], 1e-300))
+        assert change_db.max() <= tol * (1 + 1e-9)
+        assert change_db.max() > 0.01 * tol  # it did drop something that counts
+        go = (full.num_paths[:2].sum(axis=0)[:, ok] > 0)
+        np.testing.assert_array_equal(cut.num_paths[2][:, ok][~go], full.num_paths[2][:, ok][~go])
+
+
+def test_tolerance_db_is_refused_by_trace_and_with_gtd(canyon):
+    with pytest.raises(WavepathsError, match="coverage maps only"):
+        trace(canyon, [[-60, 0, 10]], [[0, 0, 1.5]], TraceOptions(tolerance_db=0.5))
+    with pytest.raises(WavepathsError, match="UTD"):
+        coverage(canyon, [[-60, 0, 10]], canyon_grid(), TraceOptions(tolerance_db=0.5), fields=FieldConfig(model="gtd"),
+                 settings=IN_PROCESS)
+    with pytest.raises(WavepathsError, match="tolerance_db"):
+        TraceOptions(tolerance_db=-1.0)

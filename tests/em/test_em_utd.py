@@ -360,3 +360,27 @@ def test_utd_magnitude_bound_holds_for_passive_faces_near_boundaries_and_at_graz
     ratio = np.maximum(abs(ds), abs(dh)) / bound
     assert ratio.max() <= 1 + 1e-12 and np.median(ratio) > 0.9
     assert (utd_magnitude_bound(p, pp, np.abs(np.sin(b0)), n, 3 * k, L) <= bound * (1 + 1e-12)).all()
+
+
+def test_utd_magnitude_bound_holds_for_the_sionna_compat_matrix(rng):
+    """Sionna's J = R0 (d1 - d4) + Rn (d2 - d3) with passive face matrices: its spectral norm
+    is at most |d1| + |d2| + |d3| + |d4|, hence within the same bound (the tradeoff
+    benchmark prunes with Sionna's coefficient model)."""
+    from wavepaths.em.sionna_compat import sionna_compat_coefficients
+    from wavepaths.em.utd import utd_magnitude_bound
+
+    N = 20_000
+    n = rng.uniform(1.0 + 1e-4, 2.0, N)
+    pp = rng.uniform(0, 1, N) * n * np.pi
+    p = rng.uniform(0, 1, N) * n * np.pi
+    p[: N // 4] = np.clip(pp[: N // 4] + np.pi + rng.normal(0, 1e-6, N // 4), 0, n[: N // 4] * np.pi)
+    b0 = rng.uniform(0.01, np.pi - 0.01, N)
+    k = 2 * np.pi * 10 ** rng.uniform(8, 11, N) / 299_792_458.0
+    L = 10 ** rng.uniform(-2, 3, N)
+
+    def passive():
+        return np.sqrt(rng.uniform(0, 1, N)) * np.exp(2j * np.pi * rng.uniform(size=N))
+
+    J = sionna_compat_coefficients(p, pp, b0, n, k, L, passive(), passive(), passive(), passive())
+    norm = np.linalg.norm(J, ord=2, axis=(-2, -1))
+    assert (norm <= utd_magnitude_bound(p, pp, np.abs(np.sin(b0)), n, k, L) * (1 + 1e-12)).all()

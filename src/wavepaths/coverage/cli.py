@@ -48,6 +48,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     _add_trace_flags(p)
+    p.add_argument("--tolerance-db", type=float, default=None,
+                   help="drop diffracted contributions, weakest first, while they change no cell's power-sum "
+                        "total by more than this many dB (bound in TraceOptions.tolerance_db; UTD model)")
     _add_field_flags(p)
     p.set_defaults(func=run)
     return p

@@ -19,6 +19,7 @@ a receiver at the cell centre.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 
 import dataclasses
@@ -37,7 +38,7 @@ from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble
-from ..search.tile import trace_tile
+from ..search.tile import finish_diffraction, trace_tile
 from ..search.trace import check_positions
 from .grid import Grid, MeshGrid, PlanarGrid
 from .inside import inside_solid_objects, solid_objects
@@ -139,24 +140,79 @@ def path_mechanism(paths: Paths) -> np.ndarray:
     return np.where(paths.depth == 0, 0, np.where(diffracted, 2, 1))
 
 
+@functools.lru_cache(maxsize=16)
+def peak_pattern_amplitude(antenna, port: int = 0, samples: int = 181) -> float:
+    """The largest ``sqrt(|C_theta|^2 + |C_phi|^2)`` of an antenna port over all directions.
+
+    Sampled on a ``samples x 2 samples`` grid of the sphere (1 degree by default) and raised
+    by 1 % (the patterns are smooth: between samples they cannot rise more than that).
+    """
+    from ..em.antennas import antenna_field
+
+    th, ph = np.meshgrid(np.linspace(0, np.pi, samples), np.linspace(-np.pi, np.pi, 2 * samples))
+    d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1).reshape(-1, 3)
+    c = antenna_field(antenna, d)[:, port, :]
+    return 1.01 * float(np.sqrt((np.abs(c) ** 2).sum(axis=1)).max())
+
+
+def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power: np.ndarray, k: int,
+                    stats) -> list[np.ndarray]:
+    """Which held-back diffracted candidates a map with ``tolerance_db`` keeps (one mask per entry).
+
+    Per (transmitter, cell), the candidates are taken weakest bound first and dropped while
+    the sum of their power bounds stays at most ``(10^(tol/10) - 1)`` times the power of the
+    cell's line-of-sight and reflected paths ``go_power`` (m * k,). Dropped paths carry at
+    most that power, so the cell's power-sum total changes by at most ``tol`` dB.
+    """
+    eps = 10 ** (ctx.options.tolerance_db / 10) - 1
+    scale = (config.wavelength / (4 * np.pi) * peak_pattern_amplitude(config.tx_antenna)
+             * peak_pattern_amplitude(config.rx_antenna)) ** 2
+    sizes = [len(p) for p in pending]
+    pair = np.concatenate([p.tx * k + p.rx for p in pending])
+    bound = np.concatenate([np.full(len(p), np.inf) if p.amp is None else p.amp for p in pending]) ** 2 * scale
+    order = np.lexsort((bound, pair))
+    sp, sb = pair[order], bound[order]
+    cum = np.cumsum(sb)
+    first = np.searchsorted(sp, sp, side="left")
+    within = cum - np.concatenate([[0.0], cum])[first]  # running sum within each pair
+    drop = np.zeros(len(pair), dtype=bool)
+    drop[order] = within <= eps * go_power[sp]
+    stats["tolerance_dropped_candidates"] = stats.get("tolerance_dropped_candidates", 0) + int(drop.sum())
+    return np.split(~drop, np.cumsum(sizes)[:-1])
+
+
+def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int):
+    """(pair, key, a_phased, power) of ``paths``: indices for the per-cell sums and the values."""
+    pair = paths.tx_index * k + paths.rx_index
+    key = path_mechanism(paths) * (m * k) + pair
+    if len(paths):
+        result = compute_fields(scene, paths, config)
+        return pair, key, result.a_phased, np.abs(result.a) ** 2
+    return pair, key, np.zeros(0, complex), np.zeros(0)
+
+
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
     """Trace one tile of cell centres ``rx`` (k, 3) [m] and sum their path coefficients.
 
-    ``rx`` must be finite and off the transmitters (checked by :func:`coverage`).
+    ``rx`` must be finite and off the transmitters (checked by :func:`coverage`). With
+    ``TraceOptions.tolerance_db``, the diffracted candidates are held back until the fields of
+    the other paths are known, and the weakest are dropped (:func:`_tolerance_keep`).
     """
     m, k = len(ctx.tx), len(rx)
-    batches, stats = trace_tile(scene, ctx, rx, 0)
+    pending = [] if ctx.options.tolerance_db is not None else None
+    batches, stats = trace_tile(scene, ctx, rx, 0, pending)
     paths = assemble(ctx.tx, rx, batches, dict(stats))
-    pair = paths.tx_index * k + paths.rx_index
-    key = path_mechanism(paths) * (m * k) + pair
+    pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
+    if pending:
+        go_power = np.bincount(pair, power, m * k)
+        keeps = _tolerance_keep(ctx, config, pending, go_power, k, stats)
+        batches += [finish_diffraction(scene, ctx, p, 0, stats, keep) for p, keep in zip(pending, keeps)]
+        # the fields again, with every path: a diffraction term next to a shadow or reflection
+        # boundary takes the side its geometrical-optics path is on (fields.chain), so the
+        # diffracted paths' fields need the others beside them
+        paths = assemble(ctx.tx, rx, batches, dict(stats))
+        pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
-    if len(paths):
-        result = compute_fields(scene, paths, config)
-        ap = result.a_phased
-        power = np.abs(result.a) ** 2
-    else:
-        ap = np.zeros(0, complex)
-        power = np.zeros(0)
     # bincount adds in path order, like FieldResult.path_gain's np.add.at
     a_total = np.bincount(pair, ap.real, m * k) + 1j * np.bincount(pair, ap.imag, m * k)
     a_sum = np.bincount(key, ap.real, n3) + 1j * np.bincount(key, ap.imag, n3)
@@ -212,7 +268,7 @@ def coverage(
         Where to evaluate: cell centres are the receivers.
     options : TraceOptions, optional
         What to trace (default: line of sight, reflections to order 2, first-order
-        diffraction with one reflection). With ``prune_db`` and the default UTD model,
+        diffraction with one reflection). With ``prune_db`` and the UTD model (textbook or Sionna compat),
         ``prune_frequency_hz`` is set to ``fields.frequency_hz`` when not given, so that
         diffracted paths are pruned by their bound too.
     fields : FieldConfig, optional
@@ -244,8 +300,10 @@ def coverage(
     cfg = fields or FieldConfig()
     cov = settings or CoverageOptions()
     _check_types(scene, grid, opts, cfg, cov)
-    if (opts.prune_db is not None and opts.prune_frequency_hz is None and cfg.model == "utd"
-            and cfg.compat == "none"):
+    if opts.tolerance_db is not None and cfg.model != "utd":
+        raise WavepathsError(f"`tolerance_db` needs the UTD model (its bound does not hold for {cfg.model!r})")
+    if (opts.prune_db is not None or opts.tolerance_db is not None) and opts.prune_frequency_hz is None \
+            and cfg.model == "utd":
         # the diffraction bound of prune_db needs the frequency, which the map knows
         opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
     tx = check_positions("tx", tx)

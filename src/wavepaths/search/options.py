@@ -76,14 +76,25 @@ class TraceOptions:
         ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
         Diffracted paths are pruned too when ``prune_frequency_hz`` is given, by the
         bound of :func:`wavepaths.search.tile._weak_diffraction` (UTD with passive faces,
-        :func:`wavepaths.em.utd.utd_magnitude_bound`), counted in the same
+        :func:`wavepaths.em.utd.utd_magnitude_bound`; it holds for the ``"utd"`` model,
+        textbook or Sionna compat, not for ``"gtd"``), counted in the same
         ``pruned_paths_upper_bound``.
     prune_frequency_hz : float or None
         The lowest frequency [Hz] the fields of these paths will be computed at, for the
         diffraction bound of ``prune_db`` (lower frequencies diffract more; the bound holds
         at every frequency above). :func:`wavepaths.coverage.coverage` fills it in from its
-        field settings when they use the default UTD model. ``None``: diffracted paths are
+        field settings when they use the UTD model. ``None``: diffracted paths are
         never pruned.
+    tolerance_db : float or None
+        Coverage maps only (:func:`wavepaths.coverage.coverage`; :func:`wavepaths.trace`
+        refuses it, having no fields): per transmitter and cell, drop diffracted
+        contributions, weakest first, while the sum of their power bounds stays at most
+        ``10^(tolerance_db / 10) - 1`` times the power of the cell's line-of-sight and
+        reflected paths. The bound is the UTD one of ``prune_db`` (at the map's frequency,
+        which coverage sets as ``prune_frequency_hz``) times the antennas' peak pattern
+        amplitudes. The cell's power-sum total then changes by at most ``tolerance_db``
+        dB; a cell that no line-of-sight or reflected path reaches loses nothing. Dropped
+        candidates are counted in ``stats["tolerance_dropped_candidates"]``.
     disable_culling : frozenset of str
         Conservative culling tests to switch off, for measuring what each one saves
         (``wavepaths bench``'s skip benchmark); every name in :data:`CULLING_TESTS`. They
@@ -103,6 +114,7 @@ class TraceOptions:
     rx_batch: int = 256
     prune_db: float | None = None
     prune_frequency_hz: float | None = None
+    tolerance_db: float | None = None
     disable_culling: frozenset = frozenset()
     compiled: bool = True
 
@@ -113,6 +125,8 @@ class TraceOptions:
             raise WavepathsError(f"unknown culling tests {sorted(unknown)}; known: {sorted(CULLING_TESTS)}")
         if self.prune_db is not None and not self.prune_db > 0:
             raise WavepathsError(f"`prune_db` must be positive or None, got {self.prune_db}")
+        if self.tolerance_db is not None and not (np.isfinite(self.tolerance_db) and self.tolerance_db > 0):
+            raise WavepathsError(f"`tolerance_db` must be positive or None, got {self.tolerance_db}")
         if self.prune_frequency_hz is not None and not (np.isfinite(self.prune_frequency_hz)
                                                         and self.prune_frequency_hz > 0):
             raise WavepathsError(f"`prune_frequency_hz` must be a positive frequency or None, got {self.prune_frequency_hz}")

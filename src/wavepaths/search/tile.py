@@ -498,8 +498,13 @@ def diffraction_tile(
     stats: Counter,
     grazing: np.ndarray,
     edges=None,
+    pending: list | None = None,
 ) -> list[PathBatch]:
     """Diffracted paths with ``a`` reflections before and ``b`` after the diffraction.
+
+    With a ``pending`` list, the candidates that passed every test but occlusion are
+    appended to it as :class:`PendingDiffraction` (with their amplitude bounds) instead of
+    being cast: :func:`finish_diffraction` casts them later.
 
     ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
     (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
@@ -560,44 +565,70 @@ def diffraction_tile(
             rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
         for rows, src_rows in _join_chunks(src, rside.dihedron * ctx.key_stride + rside.sector):
             out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
-                                           rside, rows, tside, src_rows)
+                                           rside, rows, tside, src_rows, pending)
     return out
 
 
-def _weak_diffraction(ctx: TxContext, rx: np.ndarray, tx_lv: ImageLevel, rx_lv: ImageLevel, c: np.ndarray,
-                      e: np.ndarray, phi: np.ndarray, phi_prime: np.ndarray, n: np.ndarray, te: np.ndarray,
-                      de: np.ndarray, tr: np.ndarray, dr: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(k,) bool: diffracted candidates that a stated bound puts ``prune_db`` below free space.
+def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.ndarray, n: np.ndarray,
+                                 te: np.ndarray, de: np.ndarray, tr: np.ndarray, dr: np.ndarray,
+                                 t: np.ndarray) -> np.ndarray:
+    """(k,) float64 [1/m]: an upper bound on ``|a| / (lambda / 4 pi)`` of diffracted candidates.
 
-    The bound (:attr:`TraceOptions.prune_db`): with passive reflections (``|Gamma| <= 1``)
-    before and after the edge, the field at the receiver is at most
-    ``|D| / sqrt(s s' (s + s'))`` for a unit spherical source (UTD, spherical incidence;
-    ``s'``, ``s`` the unfolded lengths before and after the edge, from the images' reduced
-    coordinates: ``s' = hypot(t_e - t, d_e)``, ``s = hypot(t_r - t, d_r)``), and ``|D|`` at
-    most :func:`~wavepaths.em.utd.utd_magnitude_bound` at the lowest frequency the fields
-    will use (``prune_frequency_hz``; the bound does not grow with frequency). Free space
-    gives ``1 / |rx - tx|``. A candidate whose ratio is below ``10^(-prune_db / 20)``, with
-    a 1 % margin for the rounding between the search's angles and the fields', is weak.
+    With passive reflections (``|Gamma| <= 1``) before and after the edge and unit antenna
+    patterns, a diffracted path's coefficient is at most
+    ``(lambda / 4 pi) |D| / sqrt(s s' (s + s'))`` (UTD, spherical incidence; ``s'``, ``s`` the
+    unfolded lengths before and after the edge, from the images' reduced coordinates:
+    ``s' = hypot(t_e - t, d_e)``, ``s = hypot(t_r - t, d_r)``), with ``|D|`` at most
+    :func:`~wavepaths.em.utd.utd_magnitude_bound` at the lowest frequency the fields will
+    use (``prune_frequency_hz``; the bound does not grow with frequency). The result carries
+    a 1 % margin for the rounding between the search's angles and the fields'.
     """
     from ..em.utd import utd_magnitude_bound
     from ..fields.chain import SIN_BETA_0_FLOOR
     from .paths import SPEED_OF_LIGHT
 
-    opts = ctx.options
-    k = 2.0 * np.pi * opts.prune_frequency_hz / SPEED_OF_LIGHT
+    k = 2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT
     s_in = np.hypot(te - t, de)
     s_out = np.hypot(tr - t, dr)
     with np.errstate(divide="ignore", invalid="ignore"):
         sin_b = np.maximum(de / s_in, SIN_BETA_0_FLOOR)
         L = s_in * s_out / (s_in + s_out) * sin_b**2
-        bound = utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L)
-        direct = np.linalg.norm(rx[rx_lv.source[e]] - ctx.tx[tx_lv.source[c]], axis=1)
-        ratio = bound * direct / np.sqrt(s_in * s_out * (s_in + s_out))
-    return np.isfinite(ratio) & (1.01 * ratio < 10 ** (-opts.prune_db / 20))
+        amp = 1.01 * utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L) / np.sqrt(s_in * s_out * (s_in + s_out))
+    return np.where(np.isfinite(amp), amp, np.inf)
+
+
+@dataclass
+class PendingDiffraction:
+    """Diffracted candidates that passed every test but occlusion, held back for the
+    tolerance of a coverage map (:func:`wavepaths.coverage.solver.solve_tile`).
+
+    Attributes
+    ----------
+    a, b : int
+        Reflections before and after the diffraction.
+    tx, rx : (k,) int64
+        Transmitter index and receiver index (tile-local, without the offset).
+    amp : (k,) float64 [1/m]
+        Upper bound on ``|a| / (lambda / 4 pi)`` with unit antenna patterns
+        (:func:`_diffraction_amplitude_bound`).
+    rest : tuple
+        What :func:`finish_diffraction` needs to cast and assemble them.
+    """
+
+    a: int
+    b: int
+    tx: np.ndarray
+    rx: np.ndarray
+    amp: np.ndarray
+    rest: tuple
+
+    def __len__(self) -> int:
+        return len(self.tx)
 
 
 def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
-                            rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray) -> list[PathBatch]:
+                            rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray,
+                            pending: list | None = None) -> list[PathBatch]:
     """Steps 3-5 of :func:`diffraction_tile` on joined candidates (receiver side ``rside[rows]``,
     transmitter side ``tside[src_rows]``)."""
     dihedra = scene.dihedra
@@ -638,10 +669,10 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
         grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
         stats["pairs_on_boundaries"] += int(near.sum())
     e, d, sec, c, t = e[ok], d[ok], sec[ok], c[ok], t[ok]
-    weak = None
-    if ctx.options.prune_db is not None and ctx.options.prune_frequency_hz is not None:
-        weak = _weak_diffraction(ctx, rx, tx_lv, rx_lv, c, e, phi[ok], phi_prime[ok], wedge[ok] / np.pi,
-                                 te[on][ok], de[on][ok], tr[on][ok], dr[on][ok], t)
+    amp = None
+    if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
+        amp = _diffraction_amplitude_bound(ctx, phi[ok], phi_prime[ok], wedge[ok] / np.pi, te[on][ok], de[on][ok],
+                                           tr[on][ok], dr[on][ok], t)
     P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
     # reflections after (receiver images) and before (transmitter images)
     ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
@@ -650,14 +681,18 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     e, d, sec, c, P, post = e[ok1], d[ok1], sec[ok1], c[ok1], P[ok1], post[ok1]
     stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
     stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
-    if weak is not None:
+    if amp is not None:
+        amp = amp[ok2][ok1]
+    if amp is not None and ctx.options.prune_db is not None:
         # pruned after the back-traces, so that the count bounds the paths dropped (not the
         # candidates): before the casts and the fields, which cost the most per path
-        weak = weak[ok2][ok1]
+        direct = np.linalg.norm(rx[rx_lv.source[e]] - ctx.tx[tx_lv.source[c]], axis=1)
+        weak = amp * direct < 10 ** (-ctx.options.prune_db / 20)
         stats["pruned_paths_upper_bound"] += int(weak.sum())
         stats[f"{tag}_pruned_candidates"] += int(weak.sum())
         keep = ~weak
-        e, d, sec, c, P, pre, post = e[keep], d[keep], sec[keep], c[keep], P[keep], pre[keep], post[keep]
+        e, d, sec, c, P, pre, post, amp = (e[keep], d[keep], sec[keep], c[keep], P[keep], pre[keep], post[keep],
+                                           amp[keep])
     # the true dihedron: the faces bounding the sector (seed §3.3)
     f0 = ctx.sectors.face[d, sec]
     fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
@@ -665,11 +700,30 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     post_polys = rx_lv.polygons[e][:, ::-1]
     rx_pos = rx[rx_lv.source[e]]
     verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
+    pend = PendingDiffraction(a, b, tx_lv.source[c], rx_lv.source[e], amp, (d, c, f0, fn, verts, post_polys))
+    if pending is not None:
+        pending.append(pend)
+        return []
+    return [finish_diffraction(scene, ctx, pend, rx_offset, stats)]
+
+
+def finish_diffraction(scene: "Scene", ctx: TxContext, pend: PendingDiffraction, rx_offset: int, stats: Counter,
+                       keep: np.ndarray | None = None) -> PathBatch:
+    """Step 5 of :func:`diffraction_tile` (occlusion of every leg) on the candidates ``pend``
+    (those of ``keep``, a bool mask, if given), and their path batch."""
+    dihedra = scene.dihedra
+    a, b = pend.a, pend.b
+    tx_lv = ctx.levels[a]
+    tag = f"diffraction_{a}r_{b}r"
+    rx_i = pend.rx
+    d, c, f0, fn, verts, post_polys = pend.rest
+    if keep is not None:
+        rx_i, d, c, f0, fn, verts, post_polys = (x[keep] for x in (rx_i, d, c, f0, fn, verts, post_polys))
     blocked = _occluded_chains(scene, verts, stats)
     stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
     keep = ~blocked
-    e, d, c, f0, fn, verts, post_polys = e[keep], d[keep], c[keep], f0[keep], fn[keep], verts[keep], post_polys[keep]
-    k = len(e)
+    rx_i, d, c, f0, fn, verts, post_polys = (x[keep] for x in (rx_i, d, c, f0, fn, verts, post_polys))
+    k = len(d)
     kinds = np.full((k, a + 1 + b), InteractionType.REFLECTION, np.int8)
     kinds[:, a] = InteractionType.DIFFRACTION
     prims = np.concatenate([tx_lv.polygons[c], d[:, None], post_polys], axis=1)
@@ -677,11 +731,16 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
         [_triangle_of(scene, tx_lv.polygons[c]), dihedra.face_triangle[f0][:, None], _triangle_of(scene, post_polys)],
         axis=1,
     )
-    return [PathBatch(tx_lv.source[c], rx_lv.source[e] + rx_offset, kinds, prims, tris, np.stack([f0, fn], axis=1), verts)]
+    return PathBatch(tx_lv.source[c], rx_i + rx_offset, kinds, prims, tris, np.stack([f0, fn], axis=1), verts)
 
 
-def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 0) -> tuple[list[PathBatch], Counter]:
-    """All paths of ``ctx.options`` from the context's transmitters to the receivers ``rx``."""
+def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 0,
+               pending: list | None = None) -> tuple[list[PathBatch], Counter]:
+    """All paths of ``ctx.options`` from the context's transmitters to the receivers ``rx``.
+
+    With a ``pending`` list, the diffracted candidates are not cast but appended to it
+    (:class:`PendingDiffraction`, see :func:`diffraction_tile`); the other paths are traced.
+    """
     opts = ctx.options
     stats: Counter = Counter()
     batches: list[PathBatch] = []
@@ -691,7 +750,8 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
         edges = ctx.edges if opts.diffraction_reflections >= 1 and ctx.apertures is not None else None
         for a in range(opts.diffraction_reflections + 1):
             for b in range(opts.diffraction_reflections + 1 - a):
-                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges)
+                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges,
+                                            pending)
     if opts.los:
         batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
     for k in range(1, opts.max_reflections + 1):

@@ -170,8 +170,8 @@ def trace(
     Raises
     ------
     WavepathsError
-        Positions that are not (n, 3) or not finite, or a transmitter that coincides
-        with a receiver.
+        Positions that are not (n, 3) or not finite, a transmitter that coincides
+        with a receiver, or ``options.tolerance_db`` (coverage maps only).
 
     Notes
     -----
@@ -180,6 +180,9 @@ def trace(
     relative to them is undefined); other paths are found as usual.
     """
     opts = options or TraceOptions()
+    if opts.tolerance_db is not None:
+        raise WavepathsError("`tolerance_db` applies to coverage maps only (it needs the fields of the other paths); "
+                             "use `prune_db` with `prune_frequency_hz` for a path query")
     tx = check_positions("tx", tx)
     rx = check_positions("rx", rx)
     diff = np.linalg.norm(tx[:, None, :] - rx[None, :, :], axis=2)
