@@ -46,11 +46,6 @@ def _cmd_info(args) -> int:
 def _trace_options(args):
     from .search import TraceOptions
 
-    # the diffraction bound of --prune-db needs the frequency the fields are computed at
-    # (the UTD model, textbook or Sionna compat; see TraceOptions.prune_frequency_hz)
-    prune_f = None
-    if args.prune_db is not None and getattr(args, "frequency", None) is not None and getattr(args, "model", "utd") == "utd":
-        prune_f = args.frequency
     return TraceOptions(
         los=not args.no_los,
         max_reflections=args.max_reflections,
@@ -58,7 +53,6 @@ def _trace_options(args):
         diffraction_reflections=args.diffraction_reflections,
         lit_region=not args.no_lit_region,
         prune_db=args.prune_db,
-        prune_frequency_hz=prune_f,
         tolerance_db=getattr(args, "tolerance_db", None),
     )
 
@@ -130,8 +124,7 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lit-region", action="store_true", help="diffraction only in the incident shadow")
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
-                   help="drop paths at least this many dB below free space: reflections, and diffraction with the "
-                        "utd model at --frequency and above (bounds in TraceOptions)")
+                   help="drop reflections at least this many dB below free space (bound in TraceOptions)")
 
 
 def _add_field_flags(p: argparse.ArgumentParser) -> None:

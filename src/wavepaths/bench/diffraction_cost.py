@@ -9,7 +9,10 @@ without diffraction, then the same reflections plus diffraction:
   then diffraction with one reflection before or after it (R-D, D-R) added, the
   default options of :func:`wavepaths.coverage.coverage`;
 * ``R2 / R2+D2``: diffraction with up to two reflections (also R-D-R, R-R-D, D-R-R);
-* ``R3 / R3+D2``: Sionna's depth 3 (benchmark 2's path types).
+* ``R3 / R3+D2``: Sionna's depth 3 (benchmark 2's path types);
+* ``R2 / R2+D1 tol 0.1 dB``: the headline pair with ``tolerance_db=0.1`` (diffracted
+  contributions that cannot change a cell's power-sum total by more than 0.1 dB dropped
+  before their casts and fields).
 
 The two maps of a pair are timed in alternation, ``repeats`` times each, and the ratio of
 medians is reported. One process (``workers=1``). Beside it, what a path costs: the map
@@ -36,6 +39,8 @@ PAIRS = [
      {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 2}),
     ("R3", {"max_reflections": 3, "diffraction": False}, "R3+D2",
      {"max_reflections": 3, "diffraction": True, "diffraction_reflections": 2}),
+    ("R2", {"max_reflections": 2, "diffraction": False}, "R2+D1 tol 0.1 dB",
+     {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 1, "tolerance_db": 0.1}),
 ]
 
 

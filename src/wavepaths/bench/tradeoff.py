@@ -5,7 +5,9 @@ The knobs that trade speed for accuracy:
 * wavepaths: the reflection order, whether diffraction is traced and with how many
   reflections, diffraction in the incident shadow only (``lit_region=False``), the
   pruning tolerance ``prune_db`` (reflected paths that a stated bound puts that far below
-  free space are dropped; :class:`~wavepaths.search.TraceOptions`) and, for maps, how many
+  free space are dropped; :class:`~wavepaths.search.TraceOptions`), for maps the tolerance
+  ``tolerance_db`` (diffracted contributions that cannot change a cell's power-sum total by
+  more than that), and, for maps, how many
   receivers per cell (``s x s`` sub-cells averaged, since Sionna's map is a cell
   average). wavepaths computes in float64 only (Embree casts in float32 with float64
   re-casts near boundaries), so a float32 knob does not exist.
@@ -52,7 +54,9 @@ FREQUENCY_HZ = 3.5e9
 # "shadow": diffracted paths only where the incident field is shadowed (lit_region=False), the
 # cheapest way to light the cells reflections leave dark; UTD's total field is then not
 # continuous across the shadow boundaries, which the error shows. "prune x dB": reflected
-# paths a stated bound puts x dB below free space are dropped (prune_db).
+# paths a stated bound puts x dB below free space are dropped (prune_db). "tol x dB":
+# diffracted contributions are dropped, weakest first, while no cell's power-sum total changes
+# by more than x dB (tolerance_db).
 WAVEPATHS_SETTINGS = [
     ("R1", 1, False, 0),
     ("R2", 2, False, 0),
@@ -64,6 +68,8 @@ WAVEPATHS_SETTINGS = [
     ("R2+D", 2, True, 0),
     ("R2+D1", 2, True, 1),
     ("R3+D1", 3, True, 1),
+    ("R2+D1 tol 0.1 dB", 2, True, 1, {"tolerance_db": 0.1}),
+    ("R3+D2 tol 0.1 dB", 3, True, 2, {"tolerance_db": 0.1}),
     ("R3+D2 prune 10 dB", 3, True, 2, {"prune_db": 10.0}),
     ("R3+D2 prune 20 dB", 3, True, 2, {"prune_db": 20.0}),
     ("R3+D2", 3, True, 2),

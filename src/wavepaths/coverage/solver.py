@@ -268,9 +268,8 @@ def coverage(
         Where to evaluate: cell centres are the receivers.
     options : TraceOptions, optional
         What to trace (default: line of sight, reflections to order 2, first-order
-        diffraction with one reflection). With ``prune_db`` and the UTD model (textbook or Sionna compat),
-        ``prune_frequency_hz`` is set to ``fields.frequency_hz`` when not given, so that
-        diffracted paths are pruned by their bound too.
+        diffraction with one reflection). With ``tolerance_db``, ``prune_frequency_hz`` is
+        set to ``fields.frequency_hz`` (the bound it uses needs the frequency).
     fields : FieldConfig, optional
         Frequency, diffraction model, antennas, transmit power.
     settings : CoverageOptions, optional
@@ -302,9 +301,8 @@ def coverage(
     _check_types(scene, grid, opts, cfg, cov)
     if opts.tolerance_db is not None and cfg.model != "utd":
         raise WavepathsError(f"`tolerance_db` needs the UTD model (its bound does not hold for {cfg.model!r})")
-    if (opts.prune_db is not None or opts.tolerance_db is not None) and opts.prune_frequency_hz is None \
-            and cfg.model == "utd":
-        # the diffraction bound of prune_db needs the frequency, which the map knows
+    if opts.tolerance_db is not None:
+        # the diffraction bound needs the frequency, which the map knows (so does prune_db then)
         opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
     tx = check_positions("tx", tx)
     _check_materials(scene, cfg)

@@ -82,9 +82,11 @@ class TraceOptions:
     prune_frequency_hz : float or None
         The lowest frequency [Hz] the fields of these paths will be computed at, for the
         diffraction bound of ``prune_db`` (lower frequencies diffract more; the bound holds
-        at every frequency above). :func:`wavepaths.coverage.coverage` fills it in from its
-        field settings when they use the UTD model. ``None``: diffracted paths are
-        never pruned.
+        at every frequency above). ``None`` (default): ``prune_db`` never prunes diffracted
+        paths. It is not filled in for you: on a map, diffraction that a free-space bound puts
+        20 dB down is often all that reaches a shadowed cell (use ``tolerance_db`` there);
+        :func:`wavepaths.coverage.coverage` sets it to the map's frequency with
+        ``tolerance_db``, whose bound needs it.
     tolerance_db : float or None
         Coverage maps only (:func:`wavepaths.coverage.coverage`; :func:`wavepaths.trace`
         refuses it, having no fields): per transmitter and cell, drop diffracted
