@@ -107,3 +107,20 @@ def test_diffraction_cost_benchmark_reports_per_path_costs():
     off_paths = p["all_paths"] - p["diffracted_paths"]
     rebuilt = 1 + p["us_per_diffracted_path"] * p["diffracted_paths"] / (p["us_per_path_off"] * off_paths)
     assert abs(rebuilt - p["ratio"]) < 1e-9 * p["ratio"]
+
+
+def test_every_path_query_setting_of_the_tradeoff_sweep_is_accepted_by_trace():
+    """Benchmark 3's path half runs trace() on each of its settings; the map-only ones
+    (tolerance_db) are left to the map half, which runs them all."""
+    import numpy as np
+
+    from wavepaths import load_scene, trace
+    from wavepaths.bench.tradeoff import WAVEPATHS_SETTINGS, path_query_settings, trace_options
+
+    scene = load_scene("street_canyon")
+    chosen = path_query_settings()
+    assert any("tolerance_db" in (x[4] if len(x) > 4 else {}) for x in WAVEPATHS_SETTINGS)
+    assert chosen and not any("tolerance_db" in (x[4] if len(x) > 4 else {}) for x in chosen)
+    assert chosen[-1] == WAVEPATHS_SETTINGS[-1]  # the reference is a path setting
+    for setting in chosen:
+        trace(scene, np.array([[-60.0, 0.0, 10.0]]), np.array([[20.0, 2.0, 1.5]]), trace_options(setting))

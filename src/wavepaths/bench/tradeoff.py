@@ -77,6 +77,15 @@ WAVEPATHS_SETTINGS = [
 QUICK_SETTINGS = ("R1", "R2", "R0+D shadow", "R0+D", "R1+D", "R2+D", "R2+D1", "R3+D1", "R3+D2 prune 20 dB")
 
 
+MAP_ONLY_OPTIONS = frozenset({"tolerance_db"})
+"""Options only coverage maps have (they need the fields of the other paths)."""
+
+
+def path_query_settings() -> list[tuple]:
+    """The entries of :data:`WAVEPATHS_SETTINGS` a path query can run (no map-only option)."""
+    return [x for x in WAVEPATHS_SETTINGS if not (len(x) > 4 and MAP_ONLY_OPTIONS & set(x[4]))]
+
+
 def trace_options(setting: tuple):
     """The :class:`~wavepaths.search.TraceOptions` of one entry of :data:`WAVEPATHS_SETTINGS`."""
     from ..search import TraceOptions
@@ -260,7 +269,7 @@ def run_path_tradeoff(quick: bool = False, n_rx: int = 100, progress=print) -> d
     ref_p, ref_f, _ = query(WAVEPATHS_SETTINGS[-1])
     ref_db = _db(_gain_per_rx(ref_p.rx_index, ref_f.a, n_rx))
     wp_points = []
-    for setting in WAVEPATHS_SETTINGS:
+    for setting in path_query_settings():
         times = []
         for _ in range(1 if quick else 3):
             p, f, el = query(setting)
