@@ -363,7 +363,7 @@ def utd_magnitude_bound(
     materials; KP's ``R = -+1`` included), hence for :func:`diffraction_jones`'s ``"utd"``
     model, whose Jones matrix ``diag(-D_s, -D_h)`` has norm ``max(|D_s|, |D_h|)``::
 
-        |D| <= sum_i |cot(eps_i / 2n)| min(1, sqrt(2 pi k L) |sin(eps_i / 2)|)
+        |D| <= sum_i min(|cot(eps_i / 2n)|, n sqrt(2 pi k L))
                / (2 n sqrt(2 pi k) max(|sin beta_0|, floor))
 
     Each of the four terms is ``cot(eps/2n) F(2 k L sin^2(eps/2))`` (module docstring), and

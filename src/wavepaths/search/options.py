@@ -75,7 +75,7 @@ class TraceOptions:
         total power changes the power-sum path gain relative to free space by at most
         ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
         Diffracted paths are pruned too when ``prune_frequency_hz`` is given, by the
-        bound of :func:`wavepaths.search.tile._weak_diffraction` (UTD with passive faces,
+        bound of :func:`wavepaths.search.tile._diffraction_amplitude_bound` (UTD with passive faces,
         :func:`wavepaths.em.utd.utd_magnitude_bound`; it holds for the ``"utd"`` model,
         textbook or Sionna compat, not for ``"gtd"``), counted in the same
         ``pruned_paths_upper_bound``.
@@ -86,7 +86,8 @@ class TraceOptions:
         paths. It is not filled in for you: on a map, diffraction that a free-space bound puts
         20 dB down is often all that reaches a shadowed cell (use ``tolerance_db`` there);
         :func:`wavepaths.coverage.coverage` sets it to the map's frequency with
-        ``tolerance_db``, whose bound needs it.
+        ``tolerance_db``, whose bound needs it (a ``prune_db`` given with it then prunes
+        diffracted paths too).
     tolerance_db : float or None
         Coverage maps only (:func:`wavepaths.coverage.coverage`; :func:`wavepaths.trace`
         refuses it, having no fields): per transmitter and cell, drop diffracted
