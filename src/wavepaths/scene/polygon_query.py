@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -66,12 +67,26 @@ def triangle_dual_basis(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarr
     return np.stack([r1, r2], axis=1)
 
 
-def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray, eps: float = 1e-9) -> np.ndarray:
+@lru_cache(maxsize=1)
+def _compiled():
+    """The compiled twin of :func:`points_in_polygons`, or ``None`` when numba is not installed."""
+    try:
+        from . import _numba
+    except ImportError:
+        return None
+    return _numba.points_in_polygons
+
+
+def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray, eps: float = 1e-9,
+                       compiled: bool | None = None) -> np.ndarray:
     """Whether ``points[i]`` lies inside polygon ``polygons[i]`` (closed).
 
     Tests the triangles of each query's polygon slot by slot (most polygons have one or
     two triangles), with the precomputed barycentric maps of
-    :func:`triangle_dual_basis`, and keeps testing only the queries not yet inside.
+    :func:`triangle_dual_basis`, and keeps testing only the queries not yet inside. With
+    numba installed (``compiled`` ``None`` or ``True``) the same tests run as one compiled
+    loop per query (:mod:`wavepaths.scene._numba`), with the same arithmetic in the same
+    order: the same answers.
 
     Parameters
     ----------
@@ -91,6 +106,13 @@ def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray,
     out = np.zeros(k, dtype=bool)
     if k == 0:
         return out
+    kernel = _compiled() if compiled is not False else None
+    if compiled and kernel is None:
+        raise ImportError("points_in_polygons(compiled=True) needs numba (pip install 'wavepaths[fast]')")
+    if kernel is not None:
+        return kernel(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(polygons, dtype=np.int64),
+                      scene.polygon_tri_ptr, scene.polygon_tris, scene.triangles, scene.vertices, scene.triangle_dual,
+                      float(eps))
     dual = scene.triangle_dual
     origin = scene.vertices[scene.triangles[:, 0]]
     ptr = scene.polygon_tri_ptr
