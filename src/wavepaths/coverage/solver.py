@@ -156,7 +156,7 @@ def peak_pattern_amplitude(antenna, port: int = 0, samples: int = 181) -> float:
 
 
 def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power: np.ndarray, k: int,
-                    stats) -> list[np.ndarray]:
+                    stats: Counter) -> list[np.ndarray]:
     """Which held-back diffracted candidates a map with ``tolerance_db`` keeps (one mask per entry).
 
     Per (transmitter, cell), the candidates are taken weakest bound first and dropped while
@@ -177,7 +177,7 @@ def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power
     within = cum - np.concatenate([[0.0], cum])[first]  # running sum within each pair
     drop = np.zeros(len(pair), dtype=bool)
     drop[order] = within <= eps * go_power[sp]
-    stats["tolerance_dropped_candidates"] = stats.get("tolerance_dropped_candidates", 0) + int(drop.sum())
+    stats["tolerance_dropped_candidates"] += int(drop.sum())
     return np.split(~drop, np.cumsum(sizes)[:-1])
 
 
@@ -299,9 +299,9 @@ def coverage(
     cfg = fields or FieldConfig()
     cov = settings or CoverageOptions()
     _check_types(scene, grid, opts, cfg, cov)
-    if opts.tolerance_db is not None and cfg.model != "utd":
-        raise WavepathsError(f"`tolerance_db` needs the UTD model (its bound does not hold for {cfg.model!r})")
     if opts.tolerance_db is not None:
+        if cfg.model != "utd":
+            raise WavepathsError(f"`tolerance_db` needs the UTD model (its bound does not hold for {cfg.model!r})")
         # the diffraction bound needs the frequency, which the map knows (so does prune_db then)
         opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
     tx = check_positions("tx", tx)
