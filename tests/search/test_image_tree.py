@@ -8,11 +8,16 @@ import pytest
 from wavepaths.errors import WavepathsError
 from wavepaths.scene import load_scene
 from wavepaths.scene.builtin import BUILTIN_SCENES
-from wavepaths.search import images
+from wavepaths.search import images, kernels
 from wavepaths.search.beams import beam_meets_spheres, build_sphere_tree, query_tree
 from wavepaths.search.images import build_image_levels, build_image_levels_all_pairs
 
 from .test_completeness import free_point, random_scene
+
+
+# the builder's exact tests run as numpy expressions (False) or as one compiled loop (True,
+# numba): both must keep the reference's chains
+COMPILED = [False, pytest.param(True, marks=pytest.mark.skipif(not kernels.available(), reason="numba is not installed"))]
 
 
 def assert_same_levels(got, ref):
@@ -30,25 +35,27 @@ def scene_points(scene, rng, count):
     return rng.uniform(lo - pad, hi + pad, (count, 3))
 
 
+@pytest.mark.parametrize("compiled", COMPILED)
 @pytest.mark.parametrize("name", sorted(BUILTIN_SCENES))
-def test_builtin_scenes_same_chains_as_all_pairs(name):
+def test_builtin_scenes_same_chains_as_all_pairs(name, compiled):
     scene = load_scene(name)
     rng = np.random.default_rng(7)
     src = scene_points(scene, rng, 5)
     for skip in (True, False):
-        got = build_image_levels(scene, src, 3, skip)
+        got = build_image_levels(scene, src, 3, skip, compiled=compiled)
         ref = build_image_levels_all_pairs(scene, src, 3, skip)
         assert_same_levels(got, ref)
 
 
+@pytest.mark.parametrize("compiled", COMPILED)
 @pytest.mark.parametrize("seed", range(8))
-def test_random_box_scenes_same_chains_as_all_pairs(seed):
+def test_random_box_scenes_same_chains_as_all_pairs(seed, compiled):
     rng = np.random.default_rng(seed)
     scene = random_scene(rng)
     src = np.array([free_point(rng, scene) for _ in range(3)])
     ref = build_image_levels_all_pairs(scene, src, 3)
     assert len(ref[3]) > 0  # not vacuous
-    assert_same_levels(build_image_levels(scene, src, 3), ref)
+    assert_same_levels(build_image_levels(scene, src, 3, compiled=compiled), ref)
 
 
 def test_small_chunks_and_blocks_give_the_same_chains(monkeypatch):
@@ -61,13 +68,14 @@ def test_small_chunks_and_blocks_give_the_same_chains(monkeypatch):
     assert_same_levels(build_image_levels(scene, src, 3), ref)
 
 
-def test_closed_room_with_source_inside_same_chains():
+@pytest.mark.parametrize("compiled", COMPILED)
+def test_closed_room_with_source_inside_same_chains(compiled):
     # a closed box: one-sided culling is on outside, off for a source inside
     from ..conftest import boxes_scene
 
     scene = boxes_scene([((0, 0, 0), (4, 3, 2.5))], ground=8)
     src = np.array([[2.0, 1.5, 1.2], [6.0, -5.0, 1.0]])
-    assert_same_levels(build_image_levels(scene, src, 3), build_image_levels_all_pairs(scene, src, 3))
+    assert_same_levels(build_image_levels(scene, src, 3, compiled=compiled), build_image_levels_all_pairs(scene, src, 3))
 
 
 def test_tree_too_large_raises(monkeypatch):

@@ -396,3 +396,39 @@ def chains_edges(apex, polys, p_centre, p_radius, normal, offset, quads, items, 
                     continue
                 out_c, out_e, cnt = _append_pair(out_c, out_e, cnt, ci, e)
     return out_c[:cnt], out_e[:cnt]
+
+
+@numba.njit(cache=True, nogil=True)
+def admissible(k, images, polygons, source, chain, q, normal, offset, outward, poly_object, inside, centre, radius,
+               tol, first_tol, out):
+    # images._admissible (numpy reference) per candidate (parent chain `chain[i]`, mirror `q[i]`),
+    # the same expressions in the same order: the parent image off q's plane, closed objects
+    # reflect from outside only, and for k >= 2 the half-space of the parent's last mirror p,
+    # not p nor coplanar with it, and the bounding-sphere beam from the parent through p
+    last = images.shape[1] - 1
+    for i in range(chain.shape[0]):
+        c = chain[i]
+        m = q[i]
+        a0, a1, a2 = images[c, last, 0], images[c, last, 1], images[c, last, 2]
+        n0, n1, n2 = normal[m, 0], normal[m, 1], normal[m, 2]
+        side = a0 * n0 + a1 * n1 + a2 * n2 - offset[m]
+        ok = abs(side) > (tol if k >= 2 else first_tol)
+        if ok and outward[m] != 0 and not inside[source[c], poly_object[m]]:
+            ok = outward[m] * side > 0
+        if ok and k >= 2:
+            p = polygons[c, polygons.shape[1] - 1]
+            if p == m:
+                ok = False
+            else:
+                p0, p1, p2, dp = normal[p, 0], normal[p, 1], normal[p, 2], offset[p]
+                b = images[c, last - 1]
+                s = b[0] * p0 + b[1] * p1 + b[2] * p2 - dp
+                sg = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
+                cq0, cq1, cq2 = centre[m, 0], centre[m, 1], centre[m, 2]
+                h = cq0 * p0 + cq1 * p1 + cq2 * p2 - dp
+                same_plane = abs(p0 * n0 + p1 * n1 + p2 * n2) > 1 - 1e-12 and abs(h) <= tol
+                ok = sg * h > -radius[m] and not same_plane
+                if ok:
+                    ok = _beam_meets(a0, a1, a2, centre[p, 0], centre[p, 1], centre[p, 2], radius[p], cq0, cq1, cq2,
+                                     radius[m], 1e-9)
+        out[i] = ok

@@ -127,7 +127,8 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
     if options.diffraction:
         max_order = max(max_order, options.diffraction_reflections)
     stats: dict = {}
-    levels = build_image_levels(scene, tx, max_order, options.skip_absorbers, stats)
+    levels = build_image_levels(scene, tx, max_order, options.skip_absorbers, stats,
+                                None if options.compiled else False)
     stats.update({f"images_order_{k}": len(lv) for k, lv in enumerate(levels)})
     # beam trees of the reflection orders, for the per-tile culling of (receiver, chain) pairs
     apertures = scene_apertures(scene) if max_order >= 1 else None

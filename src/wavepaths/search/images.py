@@ -110,7 +110,7 @@ CANDIDATE_BLOCK = 1 << 20  # (chain, mirror) candidates tested at once
 
 def _admissible(
     scene: "Scene", k: int, lv: ImageLevel, chain: np.ndarray, q: np.ndarray, centre: np.ndarray,
-    radius: np.ndarray, inside: np.ndarray, tol: float,
+    radius: np.ndarray, inside: np.ndarray, tol: float, compiled: bool = False,
 ) -> np.ndarray:
     """(m,) bool: which candidates (parent chain, mirror ``q``) of order ``k`` are kept.
 
@@ -119,7 +119,21 @@ def _admissible(
     objects reflect from outside only; for ``k >= 2``, ``q`` reaches the half-space the wave
     travels in after the parent's last mirror ``p``, is not ``p`` nor coplanar with it, and
     its bounding sphere meets the beam from the parent image through ``p``'s sphere.
+
+    ``compiled``: run the same tests as one compiled loop per candidate
+    (:func:`wavepaths.search._numba.admissible`, numba; no temporaries per test), with the
+    same expressions in the same order.
     """
+    if compiled:
+        from . import _numba
+
+        out = np.empty(len(chain), dtype=np.bool_)
+        c = np.ascontiguousarray
+        _numba.admissible(k, c(lv.images), c(lv.polygons, dtype=np.int64), c(lv.source, dtype=np.int64),
+                          c(chain, dtype=np.int64), c(q, dtype=np.int64), c(scene.polygon_normal),
+                          c(scene.polygon_offset), c(scene.outward_sign), c(scene.polygon_object, dtype=np.int64),
+                          c(inside), c(centre), c(radius), float(tol), float(1e-12 * scene.diagonal), out)
+        return out
     n = scene.polygon_normal
     d = scene.polygon_offset
     outward = scene.outward_sign
@@ -181,7 +195,8 @@ def _candidates(
 
 
 def build_image_levels(
-    scene: "Scene", sources: np.ndarray, max_order: int, skip_absorbers: bool = True, stats: dict | None = None
+    scene: "Scene", sources: np.ndarray, max_order: int, skip_absorbers: bool = True, stats: dict | None = None,
+    compiled: bool | None = None,
 ) -> list[ImageLevel]:
     """Image chains of orders ``0..max_order`` for each source point.
 
@@ -203,6 +218,9 @@ def build_image_levels(
     skip_absorbers : bool
     stats : dict, optional
         Receives ``images_order_{k}_candidates`` (candidates given the exact tests).
+    compiled : bool, optional
+        Run the exact tests as a compiled loop (numba): by default when numba is installed;
+        ``False`` runs the numpy reference; ``True`` without numba raises ``ImportError``.
 
     Returns
     -------
@@ -225,6 +243,11 @@ def build_image_levels(
     mirrors = np.nonzero(reflecting_polygons(scene, skip_absorbers))[0]
     tree = build_sphere_tree(centre[mirrors], radius[mirrors], mirrors)
     inside = source_inside_objects(scene, sources)  # decided per source, never for the whole batch
+    from . import kernels
+
+    if compiled and not kernels.available():
+        raise ImportError("build_image_levels(compiled=True) needs numba (pip install 'wavepaths[fast]')")
+    compiled = compiled is not False and kernels.available()
     num_p = max(scene.num_polygons, 1)
     for k in range(1, max_order + 1):
         lv = levels[-1]
@@ -235,7 +258,7 @@ def build_image_levels(
             got_c, got_q = [], []
             for chain, q in _candidates(scene, k, lv, rows, mirrors, tree, centre, radius):
                 tested += len(chain)
-                keep = _admissible(scene, k, lv, chain, q, centre, radius, inside, tol)
+                keep = _admissible(scene, k, lv, chain, q, centre, radius, inside, tol, compiled)
                 got_c.append(chain[keep])
                 got_q.append(q[keep])
                 total += int(keep.sum())

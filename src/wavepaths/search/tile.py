@@ -746,7 +746,8 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     batches: list[PathBatch] = []
     grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
-        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers)
+        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers,
+                                       compiled=None if opts.compiled else False)
         edges = ctx.edges if opts.diffraction_reflections >= 1 and ctx.apertures is not None else None
         for a in range(opts.diffraction_reflections + 1):
             for b in range(opts.diffraction_reflections + 1 - a):
