@@ -27,6 +27,38 @@ def _receivers(rng, n: int) -> np.ndarray:
 
 
 @needs_numba
+def test_compiled_end_sides_equal_the_numpy_frame_and_sector_lookup(rng):
+    """``_kept_pairs_end_side`` without a window: the compiled loop (frame, sector, width
+    test) keeps the same pairs with the same sector, angle, t and rho, bit for bit, and
+    counts the same rejections; among the points, some on an edge line and some in a face's
+    plane (at the margins of the on-face test)."""
+    scene = load_scene("street_canyon")
+    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2)
+    ctx_np = build_tx_context(scene, TX, opts.with_(compiled=False))
+    ctx_nb = build_tx_context(scene, TX, opts)
+    dih = scene.dihedra
+    d_all = ctx_np.diffracting
+    special = []
+    for j in d_all[:20]:  # on the edge line, and 3 m out along each face
+        special.append(dih.origin[j] + 0.3 * dih.length[j] * dih.direction[j])
+        for f in range(dih.face_ptr[j], dih.face_ptr[j + 1]):
+            special.append(dih.origin[j] + 3.0 * dih.face_direction[f])
+    pts = np.concatenate([_receivers(rng, 30), np.array(special)])
+    levels = build_image_levels(scene, pts, 2, True)
+    for b in (0, 1, 2):
+        lv = levels[b]
+        e = np.repeat(np.arange(len(lv)), len(d_all))
+        d = np.tile(d_all, len(lv))
+        s_np, s_nb = Counter(), Counter()
+        ref = tile._kept_pairs_end_side(scene, ctx_np, lv, e, d, None, s_np, "t")
+        got = tile._kept_pairs_end_side(scene, ctx_nb, lv, e, d, None, s_nb, "t")
+        assert 0 < len(ref.row) < len(e)
+        for name in ("row", "dihedron", "sector", "phi", "t", "rho"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+        assert s_nb == s_np
+
+
+@needs_numba
 @pytest.mark.parametrize("disabled", [frozenset(), frozenset({"receiver_beam"}), frozenset({"receiver_mirror_side"}),
                                       frozenset({"keller_window"})])
 def test_compiled_receiver_side_keeps_the_same_pairs_as_numpy(disabled, rng):

@@ -432,3 +432,46 @@ def admissible(k, images, polygons, source, chain, q, normal, offset, outward, p
                     ok = _beam_meets(a0, a1, a2, centre[p, 0], centre[p, 1], centre[p, 2], radius[p], cq0, cq1, cq2,
                                      radius[m], 1e-9)
         out[i] = ok
+
+
+@numba.njit(cache=True, nogil=True)
+def end_sides(images, rows, d, origin, direction, x_hat, y_hat, angles, count, width_tab, face_tol, min_width,
+              keep, sec_o, phi_o, t_o, rho_o):
+    # tile._kept_pairs_end_side without a window (numpy reference: tile._edge_frame, then
+    # topology.sectors.sector_lookup, then the width test), per pair (image row rows[i], edge
+    # d[i]): the image's last point in the edge's frame, its sector and angle in it; the
+    # pairs not on a face and in a sector wider than `min_width` are written at keep[:n],
+    # with their sector, angle, t and rho; returns n
+    last = images.shape[1] - 1
+    m = angles.shape[1]
+    n = 0
+    two_pi = 2 * np.pi
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        j = d[i]
+        v0 = images[r, last, 0] - origin[j, 0]
+        v1 = images[r, last, 1] - origin[j, 1]
+        v2 = images[r, last, 2] - origin[j, 2]
+        x = v0 * x_hat[j, 0] + v1 * x_hat[j, 1] + v2 * x_hat[j, 2]
+        y = v0 * y_hat[j, 0] + v1 * y_hat[j, 1] + v2 * y_hat[j, 2]
+        t = v0 * direction[j, 0] + v1 * direction[j, 1] + v2 * direction[j, 2]
+        theta = np.arctan2(y, x)
+        if theta < 0:
+            theta += two_pi
+        below = 0
+        for s in range(m):
+            below += angles[j, s] <= theta
+        sec = (below - 1) % count[j]
+        width = width_tab[j, sec]
+        phi = theta - angles[j, sec]
+        if phi < 0:
+            phi += two_pi
+        if phi < face_tol or width - phi < face_tol or (x == 0 and y == 0) or not width > min_width:
+            continue
+        keep[n] = i
+        sec_o[n] = sec
+        phi_o[n] = phi
+        t_o[n] = t
+        rho_o[n] = np.hypot(x, y)
+        n += 1
+    return n

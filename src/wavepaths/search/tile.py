@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..topology.sectors import sector_lookup
+from ..topology.sectors import FACE_ANGLE_TOL, sector_lookup
 from . import kernels
 from .beams import reflection_candidates
 from .context import TxContext
@@ -301,7 +301,26 @@ def _kept_pairs_end_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e: n
                          stats: Counter, tag: str) -> _EndSide:
     """The last tests of the receiver side on the (receiver image ``e``, dihedron ``d``) pairs that
     passed the culling: the Keller window (with ``window``), then the sector (not on a face,
-    wider than pi), each per pair from ``R - A`` in the edge's frame."""
+    wider than pi), each per pair from ``R - A`` in the edge's frame.
+
+    Without a window and with the compiled kernels, the frame, sector and width test run as
+    one compiled loop per pair (:func:`wavepaths.search._numba.end_sides`, the same
+    expressions)."""
+    if window is None and ctx.options.compiled and kernels.available():
+        from . import _numba
+
+        c = np.ascontiguousarray
+        k = len(e)
+        keep, sec, t = np.empty(k, np.int64), np.empty(k, np.int64), np.empty(k)
+        phi, rho = np.empty(k), np.empty(k)
+        tab = ctx.sectors
+        n = _numba.end_sides(c(rx_lv.images), c(e, dtype=np.int64), c(d, dtype=np.int64), c(scene.dihedra.origin),
+                             c(scene.dihedra.direction), c(tab.x_hat), c(tab.y_hat), c(tab.angles),
+                             c(tab.count, dtype=np.int64), c(tab.width), FACE_ANGLE_TOL,
+                             np.pi + scene.tolerances.coplanar_angle, keep, sec, phi, t, rho)
+        stats[f"{tag}_receiver_pairs_rejected_sector"] += k - n
+        keep = keep[:n]
+        return _EndSide(e[keep], d[keep], sec[:n], phi[:n], t[:n], rho[:n])
     x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
     rho = np.hypot(x, y)
     if window is not None:
