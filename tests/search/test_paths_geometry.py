@@ -258,3 +258,27 @@ def test_prune_frequency_must_be_a_positive_frequency():
         TraceOptions(prune_db=10.0, prune_frequency_hz=0.0)
     with pytest.raises(WavepathsError, match="prune_frequency_hz"):
         TraceOptions(prune_db=10.0, prune_frequency_hz=float("nan"))
+
+
+def test_path_order_does_not_depend_on_the_order_the_search_found_them():
+    """Paths of equal length (a street canyon with the transmitter and receiver on its plane
+    of symmetry: the left and right walls give mirror-image paths) come out in one order
+    whatever the order of the batches and of the rows in them."""
+    from wavepaths.search.context import build_tx_context
+    from wavepaths.search.paths import PathBatch, assemble
+    from wavepaths.search.tile import trace_tile
+
+    scene = load_scene("street_canyon")
+    tx, rx = np.array([[-60.0, 0.0, 10.0]]), np.array([[40.0, 0.0, 1.5], [10.0, 0.0, 1.5]])
+    opts = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=1)
+    batches, stats = trace_tile(scene, build_tx_context(scene, tx, opts), rx)
+    ref = assemble(tx, rx, batches, dict(stats))
+    key = np.column_stack([ref.tx_index, ref.rx_index, ref.depth, ref.lengths])
+    ties = (np.diff(key, axis=0) == 0).all(axis=1)
+    assert ties.sum() >= 4  # the case is not vacuous: mirror-image paths of equal length
+    shuffled = [PathBatch(*(np.asarray(x)[::-1] for x in (b.tx_index, b.rx_index, b.interactions, b.primitive,
+                                                         b.triangle, b.wedge_faces, b.vertices)))
+                for b in batches[::-1]]
+    got = assemble(tx, rx, shuffled, dict(stats))
+    for name in ("tx_index", "rx_index", "depth", "interactions", "primitive", "triangle", "wedge_faces", "vertices"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)

@@ -221,7 +221,8 @@ class PathBatch:
 def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict) -> Paths:
     """Concatenate path batches of different depths into one padded, sorted :class:`Paths`.
 
-    Paths are sorted by (tx, rx, depth, length) so that output order is deterministic.
+    Paths are sorted by (tx, rx, depth, length), then by their interactions and primitives,
+    so that the output order is deterministic and independent of the batches' order.
     """
     batches = [b for b in batches if len(b.tx_index)]
     dmax = max([b.interactions.shape[1] for b in batches], default=0)
@@ -249,15 +250,19 @@ def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: di
     rxi = np.concatenate([b.rx_index for b in batches])
     vertices = np.concatenate(verts)
     lengths = np.linalg.norm(np.diff(vertices, axis=1), axis=2).sum(axis=1)
-    order = np.lexsort((lengths, depth, rxi, txi))
+    kinds = np.concatenate([pad(b.interactions, dmax, 0) for b in batches])
+    prims = np.concatenate([pad(b.primitive, dmax, -1) for b in batches])
+    # paths of equal length (symmetric scenes) by their interactions: the order does not
+    # depend on the order in which the search found them
+    order = np.lexsort((*prims.T[::-1], *kinds.T[::-1], lengths, depth, rxi, txi))
     return Paths(
         tx_positions=tx,
         rx_positions=rx,
         tx_index=txi[order],
         rx_index=rxi[order],
         depth=depth[order],
-        interactions=np.concatenate([pad(b.interactions, dmax, 0) for b in batches])[order].astype(np.int8),
-        primitive=np.concatenate([pad(b.primitive, dmax, -1) for b in batches])[order],
+        interactions=kinds[order].astype(np.int8),
+        primitive=prims[order],
         triangle=np.concatenate([pad(b.triangle, dmax, -1) for b in batches])[order],
         wedge_faces=np.concatenate([b.wedge_faces for b in batches])[order],
         vertices=vertices[order],

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..topology.sectors import FACE_ANGLE_TOL, sector_lookup
 from . import kernels
-from .beams import reflection_candidates
+from .beams import morton_order, reflection_candidates
 from .context import TxContext
 from .geometry import diffraction_point_reduced
 from .images import ImageLevel, backtrace, build_image_levels
@@ -563,8 +563,12 @@ def diffraction_tile(
     # temporaries, the compiled one a single int32 array of the survivors' columns
     per_pair = 1 if (ctx.options.compiled and kernels.available()) else m + 4
     step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
+    # receiver images in Morton order: each chunk is then compact in space, and the Keller-cone
+    # culling below keeps fewer dihedra for it (etoile_crop at depth 3: 608 M -> 327 M pairs
+    # at b = 2); the paths found do not depend on the chunking
+    order = morton_order(rx_lv.last) if b >= 1 else np.arange(len(rx_lv))
     for s in range(0, len(rx_lv), step):
-        e_rows = np.arange(s, min(len(rx_lv), s + step))
+        e_rows = order[s : s + step]
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
         # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
         src = src_all
