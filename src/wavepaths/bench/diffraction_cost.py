@@ -8,6 +8,8 @@ without diffraction, then the same reflections plus diffraction:
 * ``R2 / R2+D1`` (the headline, ``diffraction_cost_ratio``): reflections to order 2,
   then diffraction with one reflection before or after it (R-D, D-R) added, the
   default options of :func:`wavepaths.coverage.coverage`;
+* ``R2 / R2+D0``: the seed's own case ("one diffraction between two fixed points", §4):
+  the diffracted paths E-D-R only, no reflection before or after the edge;
 * ``R2 / R2+D2``: diffraction with up to two reflections (also R-D-R, R-R-D, D-R-R);
 * ``R3 / R3+D2``: Sionna's depth 3 (benchmark 2's path types);
 * ``R2 / R2+D1 tol 0.1 dB``: the headline pair with ``tolerance_db=0.1`` (diffracted
@@ -35,6 +37,8 @@ SEED_RATIO = 46.0
 PAIRS = [
     ("R2", {"max_reflections": 2, "diffraction": False}, "R2+D1",
      {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 1}),
+    ("R2", {"max_reflections": 2, "diffraction": False}, "R2+D0",
+     {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 0}),
     ("R2", {"max_reflections": 2, "diffraction": False}, "R2+D2",
      {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 2}),
     ("R3", {"max_reflections": 3, "diffraction": False}, "R3+D2",
@@ -90,4 +94,6 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
                         "paths_ratio": all_paths / max(off_paths, 1), "same_geometrical_optics_paths": same_go})
     return {"scene": "simple_street_canyon", "grid_shape": list(grid.shape), "cell_size_m": cell,
             "pairs": results, "diffraction_cost_ratio": results[0]["ratio"], "headline_pair": "R2 / R2+D1",
+            # the seed's own case (one diffraction between two fixed points), beside the headline
+            "seed_case_ratio": next((r["ratio"] for r in results if r["on"] == "R2+D0"), None),
             "seed_ratio": SEED_RATIO, "target_ratio_max": 3.0}

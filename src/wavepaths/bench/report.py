@@ -98,6 +98,7 @@ def headline(results: dict) -> dict:
         "engine_candidate_ns": ps.get("engine_candidate_ns"),
         "sionna_paths_time_ratio": sp.get("sionna_paths_time_ratio"),
         "diffraction_cost_ratio": dc.get("diffraction_cost_ratio"),
+        "diffraction_cost_ratio_seed_case": dc.get("seed_case_ratio"),
         "tradeoff_points": points,
     }
     maps_verdict = (to.get("maps") or {}).get("verdict") or {}
@@ -413,7 +414,8 @@ interleaved round by round, and reported as medians over the rounds.</p>
     if dc:
         parts.append("<h2>5. Cost of diffraction</h2>")
         parts.append(f"<p>Coverage map of simple_street_canyon, {dc['grid_shape'][0]} x {dc['grid_shape'][1]} cells of "
-                     f"{dc['cell_size_m']:g} m; the seed paid {dc['seed_ratio']:g}x. Headline: {dc['headline_pair']}.</p>")
+                     f"{dc['cell_size_m']:g} m; the seed paid {dc['seed_ratio']:g}x for one diffraction between two fixed "
+                     f"points (its §4), the case of R2 / R2+D0. Headline: {dc['headline_pair']}.</p>")
         parts.append(_table([[f"{p['off']} / {p['on']}", p["off_s"]["median_s"], p["on_s"]["median_s"], p["ratio"],
                               p["diffracted_paths"], p["all_paths"], p.get("paths_ratio"), p.get("us_per_path_off"),
                               p.get("us_per_diffracted_path")] for p in dc["pairs"]],
