@@ -47,14 +47,14 @@ def test_unknown_culling_test_is_an_error():
 
 def test_receiver_side_by_edge_tree_finds_the_same_paths_as_the_dense_one(monkeypatch, rng):
     """The two implementations of the receiver side (dense products, edge-tree queries) agree."""
-    import wavepaths.search.tile as tile
+    import wavepaths.search.diffraction as diffraction
 
     scene = load_scene("street_canyon")
     rx = _street_receivers(rng, 30)
     tx = np.array([[-60.0, 0.0, 10.0]])
     opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, rx_batch=8)
     dense = trace(scene, tx, rx, opts)
-    monkeypatch.setattr(tile, "DENSE_RECEIVER_SIDE_MAX_DIHEDRA", 0)
+    monkeypatch.setattr(diffraction, "DENSE_RECEIVER_SIDE_MAX_DIHEDRA", 0)
     tree = trace(scene, tx, rx, opts)
     assert not any("rejected_mirror_side" in k for k in tree.stats)  # the tree path ran
     assert any("rejected_mirror_side" in k for k in dense.stats)

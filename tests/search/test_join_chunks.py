@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from wavepaths.search.context import DiffractionSources
-from wavepaths.search.tile import _join_chunks
+from wavepaths.search.diffraction import _join_chunks
 
 
 def sources(keys: np.ndarray) -> DiffractionSources:

@@ -7,7 +7,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-import wavepaths.search.tile as tile
+import wavepaths.search.end_sides as tile
 from wavepaths.scene import load_scene
 from wavepaths.search import TraceOptions, kernels, trace
 from wavepaths.search.context import build_tx_context

@@ -38,7 +38,8 @@ from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble
-from ..search.tile import finish_diffraction, trace_tile
+from ..search.diffraction import finish_diffraction
+from ..search.tile import trace_tile
 from ..search.trace import check_positions
 from .grid import Grid, MeshGrid, PlanarGrid
 from .inside import inside_solid_objects, solid_objects

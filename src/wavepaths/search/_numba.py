@@ -16,7 +16,7 @@ ROWS = 64  # receiver images per parallel block
 def _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h, beam,
                   planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi, keller_tol,
                   window, out_j, cnt, counts):
-    # tile._receiver_side's tests (numpy reference) for image i against every edge j. A, B,
+    # end_sides._receiver_side's tests (numpy reference) for image i against every edge j. A, B,
     # M, origin, direction, x_hat, y_hat come transposed, (3, D): the first two stages run
     # over contiguous rows, branch-free (they vectorise), and the survivors are compacted
     # into `buf`; they end as out_j[i, :cnt[i]], and counts[i] = the rejections by the
@@ -437,7 +437,7 @@ def admissible(k, images, polygons, source, chain, q, normal, offset, outward, p
 @numba.njit(cache=True, nogil=True)
 def end_sides(images, rows, d, origin, direction, x_hat, y_hat, angles, count, width_tab, face_tol, min_width,
               keep, sec_o, phi_o, t_o, rho_o):
-    # tile._kept_pairs_end_side without a window (numpy reference: tile._edge_frame, then
+    # end_sides._kept_pairs_end_side without a window (numpy reference: end_sides._edge_frame, then
     # topology.sectors.sector_lookup, then the width test), per pair (image row rows[i], edge
     # d[i]): the image's last point in the edge's frame, its sector and angle in it; the
     # pairs not on a face and in a sector wider than `min_width` are written at keep[:n],

@@ -6,7 +6,7 @@ per element in page faults alone); here each runs pair by pair, with the same te
 margins and an early exit:
 
 * :func:`receiver_pairs`: the receiver side of the diffraction search, (receiver images x
-  dihedra) (:func:`wavepaths.search.tile._receiver_side`; on ``etoile_crop`` at depth 3,
+  dihedra) (:func:`wavepaths.search.end_sides._receiver_side`; on ``etoile_crop`` at depth 3,
   600 M pairs at about 54 ns each in numpy, about 6 ns here), with one more test, the
   beams through the image's mirrors' rectangles (:func:`chain_side_planes`);
 * :func:`reflection_pairs`: the reflection candidates, (receiver clusters x chain-beam
@@ -248,7 +248,7 @@ def receiver_pairs(
     window: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None,
     parallel: bool | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, int, int, int]:
-    """The dense receiver-side tests of :func:`wavepaths.search.tile._receiver_side`, fused per pair.
+    """The dense receiver-side tests of :func:`wavepaths.search.end_sides._receiver_side`, fused per pair.
 
     Parameters
     ----------
@@ -272,9 +272,9 @@ def receiver_pairs(
     R : (E, 3) float64
         The same images in scene coordinates [m] (for the Keller window, in the edge frame).
     frame : (origin, direction, x_hat, y_hat), each (D, 3)
-        The edges' frames (:func:`wavepaths.search.tile._edge_frame`).
+        The edges' frames (:func:`wavepaths.search.end_sides._edge_frame`).
     window : (v_lo, lo, v_hi, hi (D,), keller_tol) or None
-        The Keller window of each edge (:func:`wavepaths.search.tile._keller_window`,
+        The Keller window of each edge (:func:`wavepaths.search.end_sides._keller_window`,
         indexed by these D edges) and its margin [m].
     parallel : bool, optional
         Run blocks of images on the kernels' threads; default: for calls of at least

@@ -75,7 +75,7 @@ class TraceOptions:
         total power changes the power-sum path gain relative to free space by at most
         ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
         Diffracted paths are pruned too when ``prune_frequency_hz`` is given, by the
-        bound of :func:`wavepaths.search.tile._diffraction_amplitude_bound` (UTD with passive faces,
+        bound of :func:`wavepaths.search.diffraction._diffraction_amplitude_bound` (UTD with passive faces,
         :func:`wavepaths.em.utd.utd_magnitude_bound`; it holds for the ``"utd"`` model,
         textbook or Sionna compat, not for ``"gtd"``), counted in the same
         ``pruned_paths_upper_bound``.

@@ -1,0 +1,67 @@
+"""Candidate chains of a tile: the budget that bounds them, the casts that decide their
+occlusion, and the triangles they touch (shared by the line-of-sight, reflection and
+diffraction searches of :mod:`wavepaths.search.tile` and :mod:`wavepaths.search.diffraction`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+
+CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~100 MB)
+
+
+def leg_order(legs: int) -> list[int]:
+    """Legs of a chain in casting order: the last (to the receiver), the first, then the others."""
+    return list(dict.fromkeys([legs - 1, 0, *range(1, legs - 1)]))
+
+
+def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None) -> np.ndarray:
+    """(k,) bool: whether any segment of the chains ``vertices`` (k, s, 3) is blocked.
+
+    A chain with a degenerate segment (shorter than the weld tolerance: two interactions
+    at one point, e.g. a reflection on a face exactly at the edge it then diffracts on)
+    counts as blocked: its geometry is undefined.
+    """
+    k, s, _ = vertices.shape
+    seg = np.linalg.norm(np.diff(vertices, axis=1), axis=2)
+    # only segments joining two interactions can be degenerate; a transmitter or receiver may
+    # sit as close to a surface as it likes
+    inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))
+    degenerate = (inner <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
+    if s > 2:
+        # ... but one exactly on the face or edge it would interact with (within the casters'
+        # plane tolerance, i.e. rounding) takes part in no interaction there (docs/search.md)
+        from ..raycast import plane_tolerance
+
+        degenerate |= (seg[:, [0, -1]] <= plane_tolerance(scene)).any(axis=1)
+    # the true vertices: by the casters' rule (wavepaths.raycast) an end on a surface does not
+    # hit it, and a face next to it still blocks (no lifted or shortened copies)
+    # one leg at a time, each cast only for the chains still clear (compaction): the leg to
+    # the receiver first (most often blocked), then from the transmitter, then the inner ones
+    blocked = np.zeros((k, s - 1), dtype=bool)
+    alive = np.nonzero(~degenerate)[0]
+    for j in leg_order(s - 1):
+        if len(alive) == 0:
+            break
+        hit = scene.raycaster.occluded(vertices[alive, j], vertices[alive, j + 1])
+        stats["rays_cast"] += len(alive)
+        blocked[alive[hit], j] = True
+        alive = alive[~hit]
+    if exact is not None and exact.any():
+        # chains of (tx, rx) pairs that sit on a shadow or reflection boundary: float64 casts
+        sel = np.nonzero(exact)[0]
+        blocked[sel] = scene.exact_raycaster.occluded(
+            vertices[sel, :-1].reshape(-1, 3), vertices[sel, 1:].reshape(-1, 3)
+        ).reshape(len(sel), s - 1)
+        stats["rays_cast_float64"] += len(sel) * (s - 1)
+    return blocked.any(axis=1) | degenerate
+
+
+def triangle_of(scene: "Scene", polygons: np.ndarray) -> np.ndarray:
+    return scene.polygon_tris[scene.polygon_tri_ptr[polygons]]

@@ -1,0 +1,357 @@
+"""Diffracted paths of a tile: one diffraction with ``a`` reflections before and ``b`` after.
+
+The transmitter side's sources (image, dihedron) come from the context, culled per chunk
+of receiver images by their Keller cones; the receiver side is
+:mod:`wavepaths.search.end_sides`; the two are joined on (dihedron, sector), which is the
+seed's FindDihedron test (§3.3); then the closed-form diffraction point (§2.3), the
+back-traces of the reflections on both sides and the occlusion of every leg.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import kernels
+from .beams import morton_order
+from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
+from .context import TxContext
+from .end_sides import _EndSide, _keller_window, _receiver_side, _receiver_side_by_tree, _transmitter_side
+from .geometry import diffraction_point_reduced
+from .images import ImageLevel, backtrace
+from .paths import InteractionType, PathBatch
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+
+# the receiver side of order >= 1 is dense (matrix products over images x dihedra) up to this
+# many dihedra, tree queries above: dense was 2.6x faster with 640 (etoile_crop, R3+D2) and
+# 1.5x with ~100 (simple_street_canyon map, R2+D1); the tree's cost grows as log(dihedra)
+DENSE_RECEIVER_SIDE_MAX_DIHEDRA = 4096
+
+
+def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.ndarray):
+    """The (source, dihedron) pairs whose Keller cones can reach a sphere around ``targets``.
+
+    Along an edge from A (t = 0) to B (t = L), a receiver R is reached at some point iff
+    ``w.(R - A)/|R - A| >= cos beta_A`` and ``w.(R - B)/|R - B| <= cos beta_B`` with
+    ``cos beta_X = w.(X - S)/|X - S|`` (the diffracted cone's opening equals the incident
+    angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
+    with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
+    """
+    if len(src.chain) == 0 or len(targets) == 0:
+        return src
+    c = targets.mean(axis=0)
+    r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
+    d = src.dihedron
+    w = dihedra.direction[d]
+    A = dihedra.origin[d]
+    B = A + dihedra.length[d][:, None] * w
+
+    def cos_to(x_from, x_to):
+        v = x_to - x_from
+        return np.einsum("ij,ij->i", v, w) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+
+    cos_a = cos_to(sources, A)
+    cos_b = cos_to(sources, B)
+
+    def angle_range(X):
+        v = c - X
+        dist = np.linalg.norm(v, axis=1)
+        theta = np.arccos(np.clip(np.einsum("ij,ij->i", v, w) / np.maximum(dist, 1e-300), -1, 1))
+        delta = np.where(dist > r, np.arcsin(np.clip(r / np.maximum(dist, 1e-300), 0, 1)), np.pi)
+        return theta, delta
+
+    th_a, de_a = angle_range(A)
+    th_b, de_b = angle_range(B)
+    slack = 1e-9
+    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) >= cos_a - slack
+    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) <= cos_b + slack
+    keep = reach_a & reach_b
+    if keep.all():
+        return src
+    return src.take(np.nonzero(keep)[0])
+
+
+def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
+    """For each receiver-side key, all transmitter-side sources with the same key, in chunks.
+
+    Yields ``(rows, src_rows)``: the receiver-side row and the transmitter-side row of every
+    match, at most about ``budget`` matches per chunk (a single key with more matches than
+    that comes in one chunk of its own), so that memory stays bounded however many image
+    sources share a (dihedron, sector).
+    """
+    nu = len(src.unique_keys)
+    if nu == 0 or len(keys) == 0:
+        return
+    pos = np.minimum(np.searchsorted(src.unique_keys, keys), nu - 1)
+    match = src.unique_keys[pos] == keys
+    count = np.where(match, src.key_count[pos], 0)
+    first = np.where(match, src.key_start[pos], 0)
+    ends = np.cumsum(count)
+    total = int(ends[-1])
+    lo = 0
+    while lo < len(keys):
+        base = int(ends[lo] - count[lo])
+        if base >= total:
+            return
+        hi = max(int(np.searchsorted(ends, base + budget, side="right")), lo + 1)
+        c = count[lo:hi]
+        rows = np.repeat(np.arange(lo, hi), c)
+        offs = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+        yield rows, np.repeat(first[lo:hi], c) + offs
+        lo = hi
+
+
+def diffraction_tile(
+    scene: "Scene",
+    ctx: TxContext,
+    a: int,
+    b: int,
+    rx: np.ndarray,
+    rx_levels: list[ImageLevel],
+    rx_offset: int,
+    stats: Counter,
+    grazing: np.ndarray,
+    edges=None,
+    pending: list | None = None,
+) -> list[PathBatch]:
+    """Diffracted paths with ``a`` reflections before and ``b`` after the diffraction.
+
+    With a ``pending`` list, the candidates that passed every test but occlusion are
+    appended to it as :class:`PendingDiffraction` (with their amplitude bounds) instead of
+    being cast: :func:`finish_diffraction` casts them later.
+
+    ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
+    (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
+    queries instead of the dense product when there are more than
+    ``DENSE_RECEIVER_SIDE_MAX_DIHEDRA`` candidate dihedra.
+
+    Also marks in ``grazing`` (m, n) the (tx, rx) pairs for which a candidate lies within
+    the float32 uncertainty of a shadow or reflection boundary of its edge: the geometrical
+    optics paths of those pairs are then cast in float64, so that the UTD field, whose
+    boundary terms switch by the float64 angles, stays continuous.
+
+    Order of the tests, cheapest and most selective first:
+
+    1. per (receiver image, dihedron), dense: the mirror side and beam of the image's
+       last mirror, the sector around the edge (:func:`_receiver_side`);
+    2. the join with the transmitter side on (dihedron, sector): FindDihedron (seed
+       §3.3) accepts E-P-R exactly when E and R lie in the same sector of the edge (a
+       sector is a prism around the edge line), whose bounding faces are the true
+       dihedron, so the join *is* the seed's test, evaluated once per end, not per path
+       (:func:`~wavepaths.topology.sectors.sector_angle`; tests/search check it against
+       :func:`~wavepaths.topology.find_dihedron.find_dihedron`);
+    3. the closed-form diffraction point (seed §2.3) in the reduced coordinates of the
+       two ends, ``t = (t_e d_r + t_r d_e) / (d_e + d_r)``, on the edge segment;
+    4. the reflection points on both sides by the image method (back-traces);
+    5. occlusion of every leg, cast in one batch.
+    """
+    dihedra = scene.dihedra
+    tx_lv = ctx.levels[a]
+    rx_lv = rx_levels[b]
+    tag = f"diffraction_{a}r_{b}r"
+    out: list[PathBatch] = []
+    if len(rx_lv) == 0 or len(ctx.diffraction_sources[a].chain) == 0:
+        return out
+    src_all = ctx.diffraction_sources[a]
+    m = int(ctx.sectors.angles.shape[1])
+    # receiver images per chunk: the numpy receiver side holds about m + 4 (images x dihedra)
+    # temporaries, the compiled one a single int32 array of the survivors' columns
+    per_pair = 1 if (ctx.options.compiled and kernels.available()) else m + 4
+    step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
+    # receiver images in Morton order: each chunk is then compact in space, and the Keller-cone
+    # culling below keeps fewer dihedra for it (etoile_crop at depth 3: 608 M -> 327 M pairs
+    # at b = 2); the paths found do not depend on the chunking
+    order = morton_order(rx_lv.last) if b >= 1 else np.arange(len(rx_lv))
+    for s in range(0, len(rx_lv), step):
+        e_rows = order[s : s + step]
+        # Keller-cone culling for this chunk of receivers (or receiver images): keep the
+        # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
+        src = src_all
+        if "keller_cone" not in ctx.options.disable_culling:
+            src = _cull_sources_by_keller_cone(dihedra, src_all, tx_lv.last[src_all.chain], rx_lv.last[e_rows])
+        stats[f"{tag}_source_pairs_culled_keller_cone"] += len(src_all.chain) - len(src.chain)
+        diffr = np.unique(src.dihedron)
+        if len(diffr) == 0:
+            continue
+        stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
+        tside = _transmitter_side(scene, ctx, tx_lv, src)
+        window = None if "keller_window" in ctx.options.disable_culling else _keller_window(scene, tside)
+        if (b >= 1 and edges is not None and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA
+                and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling):
+            rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag, window)
+        else:
+            rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
+        for rows, src_rows in _join_chunks(src, rside.dihedron * ctx.key_stride + rside.sector):
+            out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
+                                           rside, rows, tside, src_rows, pending)
+    return out
+
+
+def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.ndarray, n: np.ndarray,
+                                 te: np.ndarray, de: np.ndarray, tr: np.ndarray, dr: np.ndarray,
+                                 t: np.ndarray) -> np.ndarray:
+    """(k,) float64 [1/m]: an upper bound on ``|a| / (lambda / 4 pi)`` of diffracted candidates.
+
+    With passive reflections (``|Gamma| <= 1``) before and after the edge and unit antenna
+    patterns, a diffracted path's coefficient is at most
+    ``(lambda / 4 pi) |D| / sqrt(s s' (s + s'))`` (UTD, spherical incidence; ``s'``, ``s`` the
+    unfolded lengths before and after the edge, from the images' reduced coordinates:
+    ``s' = hypot(t_e - t, d_e)``, ``s = hypot(t_r - t, d_r)``), with ``|D|`` at most
+    :func:`~wavepaths.em.utd.utd_magnitude_bound` at the lowest frequency the fields will
+    use (``prune_frequency_hz``; the bound does not grow with frequency). The result carries
+    a 1 % margin for the rounding between the search's angles and the fields'.
+    """
+    from ..em.utd import utd_magnitude_bound
+    from ..fields.chain import SIN_BETA_0_FLOOR
+    from .paths import SPEED_OF_LIGHT
+
+    k = 2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT
+    s_in = np.hypot(te - t, de)
+    s_out = np.hypot(tr - t, dr)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sin_b = np.maximum(de / s_in, SIN_BETA_0_FLOOR)
+        L = s_in * s_out / (s_in + s_out) * sin_b**2
+        amp = 1.01 * utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L) / np.sqrt(s_in * s_out * (s_in + s_out))
+    return np.where(np.isfinite(amp), amp, np.inf)
+
+
+@dataclass
+class PendingDiffraction:
+    """Diffracted candidates that passed every test but occlusion, held back for the
+    tolerance of a coverage map (:func:`wavepaths.coverage.solver.solve_tile`).
+
+    Attributes
+    ----------
+    a, b : int
+        Reflections before and after the diffraction.
+    tx, rx : (k,) int64
+        Transmitter index and receiver index (tile-local, without the offset).
+    amp : (k,) float64 [1/m]
+        Upper bound on ``|a| / (lambda / 4 pi)`` with unit antenna patterns
+        (:func:`_diffraction_amplitude_bound`).
+    rest : tuple
+        What :func:`finish_diffraction` needs to cast and assemble them.
+    """
+
+    a: int
+    b: int
+    tx: np.ndarray
+    rx: np.ndarray
+    amp: np.ndarray
+    rest: tuple
+
+    def __len__(self) -> int:
+        return len(self.tx)
+
+
+def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
+                            rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray,
+                            pending: list | None = None) -> list[PathBatch]:
+    """Steps 3-5 of :func:`diffraction_tile` on joined candidates (receiver side ``rside[rows]``,
+    transmitter side ``tside[src_rows]``)."""
+    dihedra = scene.dihedra
+    tx_lv = ctx.levels[a]
+    stats[f"{tag}_candidates"] += len(rows)
+    if len(rows) == 0:
+        return []
+    # closed-form point in the reduced coordinates (seed §2.3), then on the segment
+    d = rside.dihedron[rows]
+    te, de = tside.t[src_rows], tside.rho[src_rows]
+    tr, dr = rside.t[rows], rside.rho[rows]
+    t = diffraction_point_reduced(te, de, tr, dr)
+    on = (t >= 0) & (t <= dihedra.length[d])
+    stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
+    if tside.visible is not None:
+        # order 0: the point lies in a shadow proven from the transmitter (the first leg is
+        # blocked); order >= 1: the leg to the last image cannot cross the last mirror
+        seen = tside.visible.may_see(src_rows, t, dihedra.length[d])
+        stats[f"{tag}_rejected_{'hidden' if a == 0 else 'aperture'}"] += int((on & ~seen).sum())
+        on &= seen
+    rows, src_rows, d, t = rows[on], src_rows[on], d[on], t[on]
+    phi, phi_prime = rside.phi[rows], tside.phi[src_rows]
+    sec = rside.sector[rows]
+    ok = np.ones(len(rows), dtype=bool)
+    if not ctx.options.lit_region:
+        shadow = np.abs(phi - phi_prime) > np.pi
+        stats[f"{tag}_rejected_lit_region"] += int((~shadow).sum())
+        ok &= shadow
+    # GO rays within the float32 uncertainty of the edge: the angular distance to the shadow
+    # or reflection boundary times the shorter leg
+    wedge = ctx.sectors.width[d, sec]
+    leg = np.minimum(np.hypot(te[on] - t, de[on]), np.hypot(tr[on] - t, dr[on]))
+    offs = np.minimum(np.abs(np.abs(phi - phi_prime) - np.pi), np.abs(phi + phi_prime - np.pi))
+    offs = np.minimum(offs, np.abs(phi + phi_prime - (2 * wedge - np.pi)))
+    near = (offs * leg < 4 * scene.length_tolerance(scene.tolerances.ray_offset)) & ok
+    e, c = rside.row[rows], tside.row[src_rows]
+    if near.any():
+        grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
+        stats["pairs_on_boundaries"] += int(near.sum())
+    e, d, sec, c, t = e[ok], d[ok], sec[ok], c[ok], t[ok]
+    amp = None
+    if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
+        amp = _diffraction_amplitude_bound(ctx, phi[ok], phi_prime[ok], wedge[ok] / np.pi, te[on][ok], de[on][ok],
+                                           tr[on][ok], dr[on][ok], t)
+    P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
+    # reflections after (receiver images) and before (transmitter images)
+    ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
+    e, d, sec, c, P = e[ok2], d[ok2], sec[ok2], c[ok2], P[ok2]
+    ok1, pre, rej1 = backtrace(scene, P, tx_lv, c)
+    e, d, sec, c, P, post = e[ok1], d[ok1], sec[ok1], c[ok1], P[ok1], post[ok1]
+    stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
+    stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
+    if amp is not None:
+        amp = amp[ok2][ok1]
+    if amp is not None and ctx.options.prune_db is not None:
+        # pruned after the back-traces, so that the count bounds the paths dropped (not the
+        # candidates): before the casts and the fields, which cost the most per path
+        direct = np.linalg.norm(rx[rx_lv.source[e]] - ctx.tx[tx_lv.source[c]], axis=1)
+        weak = amp * direct < 10 ** (-ctx.options.prune_db / 20)
+        stats["pruned_paths_upper_bound"] += int(weak.sum())
+        stats[f"{tag}_pruned_candidates"] += int(weak.sum())
+        keep = ~weak
+        e, d, sec, c, P, pre, post, amp = (e[keep], d[keep], sec[keep], c[keep], P[keep], pre[keep], post[keep],
+                                           amp[keep])
+    # the true dihedron: the faces bounding the sector (seed §3.3)
+    f0 = ctx.sectors.face[d, sec]
+    fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
+    post = post[:, ::-1]  # path order after the diffraction
+    post_polys = rx_lv.polygons[e][:, ::-1]
+    rx_pos = rx[rx_lv.source[e]]
+    verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
+    pend = PendingDiffraction(a, b, tx_lv.source[c], rx_lv.source[e], amp, (d, c, f0, fn, verts, post_polys))
+    if pending is not None:
+        pending.append(pend)
+        return []
+    return [finish_diffraction(scene, ctx, pend, rx_offset, stats)]
+
+
+def finish_diffraction(scene: "Scene", ctx: TxContext, pend: PendingDiffraction, rx_offset: int, stats: Counter,
+                       keep: np.ndarray | None = None) -> PathBatch:
+    """Step 5 of :func:`diffraction_tile` (occlusion of every leg) on the candidates ``pend``
+    (those of ``keep``, a bool mask, if given), and their path batch."""
+    dihedra = scene.dihedra
+    a, b = pend.a, pend.b
+    tx_lv = ctx.levels[a]
+    tag = f"diffraction_{a}r_{b}r"
+    rx_i = pend.rx
+    d, c, f0, fn, verts, post_polys = pend.rest
+    if keep is not None:
+        rx_i, d, c, f0, fn, verts, post_polys = (x[keep] for x in (rx_i, d, c, f0, fn, verts, post_polys))
+    blocked = occluded_chains(scene, verts, stats)
+    stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
+    keep = ~blocked
+    rx_i, d, c, f0, fn, verts, post_polys = (x[keep] for x in (rx_i, d, c, f0, fn, verts, post_polys))
+    k = len(d)
+    kinds = np.full((k, a + 1 + b), InteractionType.REFLECTION, np.int8)
+    kinds[:, a] = InteractionType.DIFFRACTION
+    prims = np.concatenate([tx_lv.polygons[c], d[:, None], post_polys], axis=1)
+    tris = np.concatenate(
+        [triangle_of(scene, tx_lv.polygons[c]), dihedra.face_triangle[f0][:, None], triangle_of(scene, post_polys)],
+        axis=1,
+    )
+    return PathBatch(tx_lv.source[c], rx_i + rx_offset, kinds, prims, tris, np.stack([f0, fn], axis=1), verts)
