@@ -7,7 +7,8 @@ import pytest
 
 from wavepaths import TraceOptions, trace
 from wavepaths.scene import load_scene
-from wavepaths.search.beams import chain_beams_meet, chains_meeting_edges, edge_tree, scene_apertures
+from wavepaths.search.apertures import chain_beams_meet, scene_apertures
+from wavepaths.search.beams import chains_meeting_edges, edge_tree
 from wavepaths.search.context import build_tx_context
 
 from .helpers import path_keys

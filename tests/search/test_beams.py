@@ -11,9 +11,8 @@ from wavepaths import TraceOptions
 from wavepaths.scene import load_scene
 from wavepaths.scene.polygon_query import points_in_polygons
 from wavepaths.search import beams as beams_mod
-from wavepaths.search.beams import (
-    beams_reaching, build_chain_beams, chain_beams_meet, polygon_quads, quad_side_planes, reflection_candidates,
-)
+from wavepaths.search.apertures import chain_beams_meet, polygon_quads, quad_side_planes
+from wavepaths.search.beams import beams_reaching, build_chain_beams, reflection_candidates
 from wavepaths.search.context import build_tx_context
 from wavepaths.search.images import backtrace, polygon_spheres
 

@@ -9,7 +9,7 @@ from wavepaths.errors import WavepathsError
 from wavepaths.scene import load_scene
 from wavepaths.scene.builtin import BUILTIN_SCENES
 from wavepaths.search import images, kernels
-from wavepaths.search.beams import beam_meets_spheres, build_sphere_tree, query_tree
+from wavepaths.search.spheres import beam_meets_spheres, build_sphere_tree, query_tree
 from wavepaths.search.images import build_image_levels, build_image_levels_all_pairs
 
 from .test_completeness import free_point, random_scene

@@ -136,8 +136,8 @@ def test_without_numba_the_numpy_reference_runs(monkeypatch, rng):
 
 @needs_numba
 def test_compiled_chain_side_planes_equal_the_numpy_composition(rng):
-    """The kernel's side planes equal beams.chain_apertures then beams.quad_side_planes (1e-12)."""
-    from wavepaths.search.beams import chain_apertures, quad_side_planes, scene_apertures
+    """The kernel's side planes equal apertures.chain_apertures then apertures.quad_side_planes (1e-12)."""
+    from wavepaths.search.apertures import chain_apertures, quad_side_planes, scene_apertures
 
     scene = load_scene("street_canyon")
     rx = _receivers(rng, 6)
@@ -185,7 +185,8 @@ def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng):
 def test_compiled_chains_meeting_edges_equal_the_numpy_tree_query(order, rng):
     """beams.chains_meeting_edges: the same (chain, dihedron) pairs compiled or in numpy, for
     the transmitter's chains and for receivers' chains."""
-    from wavepaths.search.beams import chains_meeting_edges, edge_tree, scene_apertures
+    from wavepaths.search.apertures import scene_apertures
+    from wavepaths.search.beams import chains_meeting_edges, edge_tree
 
     scene = load_scene("street_canyon")
     apertures = scene_apertures(scene)

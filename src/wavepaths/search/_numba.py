@@ -133,8 +133,8 @@ def receiver_pairs_serial(I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q
 @numba.njit(cache=True, nogil=True, inline="always")
 def _side_planes(a0, a1, a2, polys, quads, normal, offset, q, out):
     # one chain (mirrors `polys`, last image a): each mirror's rectangle mirrored forward across
-    # the later mirrors (beams.chain_apertures), then the four side planes from the apex
-    # (beams.quad_side_planes: inward unit normals, zero for a degenerate plane) into out (4k, 3)
+    # the later mirrors (apertures.chain_apertures), then the four side planes from the apex
+    # (apertures.quad_side_planes: inward unit normals, zero for a degenerate plane) into out (4k, 3)
     k = polys.shape[0]
     for j in range(k):
         p = polys[j]
@@ -175,7 +175,7 @@ def chain_side_planes(apex, polys, quads, normal, offset, out):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _beam_meets(a0, a1, a2, p0, p1, p2, pr, c0, c1, c2, cr, slack):
-    # beams.beam_meets_spheres for one pair: the caps of directions subtended from the apex
+    # spheres.beam_meets_spheres for one pair: the caps of directions subtended from the apex
     # by the two spheres overlap (within `slack` rad), or the apex is inside either sphere
     t0, t1, t2 = p0 - a0, p1 - a1, p2 - a2
     dp = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
@@ -273,7 +273,7 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
                         break
                 if not ok:
                     continue
-                # the rectangles (beams.chain_beams_meet, sphere form)
+                # the rectangles (apertures.chain_beams_meet, sphere form)
                 _side_planes(b0, b1, b2, polys[c], quads, normal, offset, q, planes)
                 for p in range(4 * k):
                     if planes[p, 0] * e0 + planes[p, 1] * e1 + planes[p, 2] * e2 < -(tr + far):
@@ -323,7 +323,7 @@ def chains_edges(apex, polys, p_centre, p_radius, normal, offset, quads, items, 
     rad = np.empty(k)
     for ci in range(m):
         a0, a1, a2 = apex[ci, 0], apex[ci, 1], apex[ci, 2]
-        # the apertures' spheres mirrored forward across the later mirrors (beams.chain_apertures)
+        # the apertures' spheres mirrored forward across the later mirrors (apertures.chain_apertures)
         for j in range(k):
             pj = polys[ci, j]
             c0, c1, c2 = p_centre[pj, 0], p_centre[pj, 1], p_centre[pj, 2]

@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING, Iterator
 import numpy as np
 
 from ..topology.sectors import SectorTable, sector_of, sector_table
-from .beams import Apertures, ChainBeams, build_chain_beams, chains_meeting_edges, edge_tree, scene_apertures
+from .apertures import Apertures, scene_apertures
+from .beams import ChainBeams, build_chain_beams, chains_meeting_edges, edge_tree
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
 from .visibility import VisibilityWindows, aperture_windows, visibility_windows

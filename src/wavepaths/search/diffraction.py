@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import kernels
-from .beams import morton_order
+from .spheres import morton_order
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
 from .end_sides import _EndSide, _keller_window, _receiver_side, _receiver_side_by_tree, _transmitter_side

@@ -240,7 +240,7 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
 
     One test more, after the beam (``receiver_aperture``): the edge must meet the beams
     from the image through its mirrors' rectangles (the test of
-    :func:`~wavepaths.search.beams.chain_beams_meet`, which the tree-based receiver side
+    :func:`~wavepaths.search.apertures.chain_beams_meet`, which the tree-based receiver side
     applies too). In numpy it would cost four plane tests per pair and mirror over every
     pair; fused, it costs the planes a pair needs before it fails one.
     """

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import WavepathsError
 from ..scene.closed import points_inside_closed
-from .beams import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree
+from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree
 from .geometry import mirror_points, segment_plane_intersection
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -163,7 +163,7 @@ def _candidates(
 
     Order 1: every mirror. Order ``k >= 2``: the mirrors whose path of nodes in ``tree``
     passes the parent's half-space and beam tests on the nodes' bounding spheres (see
-    :func:`~wavepaths.search.beams.query_tree`). Both tests are monotone in the sphere and
+    :func:`~wavepaths.search.spheres.query_tree`). Both tests are monotone in the sphere and
     the nodes' spheres contain their items' spheres (with margins far above rounding), so
     every mirror that :func:`_admissible` would keep is a candidate.
     """
@@ -202,7 +202,7 @@ def build_image_levels(
 
     The chains are those of :func:`build_image_levels_all_pairs` (the same set, in the same
     order), found without testing every (chain, mirror) pair: the mirrors are held in a
-    :class:`~wavepaths.search.beams.SphereTree` of their bounding spheres, and each parent
+    :class:`~wavepaths.search.spheres.SphereTree` of their bounding spheres, and each parent
     chain of order ``k - 1`` queries it with its half-space and its beam (the cone from its
     image through its last mirror's bounding sphere); only the mirrors found go through the
     exact tests (:func:`_admissible`). Parents are processed in chunks of ``PARENT_CHUNK``

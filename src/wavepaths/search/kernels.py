@@ -118,8 +118,8 @@ def chain_side_planes(apex: np.ndarray, polys: np.ndarray, quads: np.ndarray, no
                       offset: np.ndarray) -> np.ndarray:
     """(E, 4k, 3) float64: the side planes of the beams from each chain's last image through its mirrors' rectangles.
 
-    :func:`wavepaths.search.beams.chain_apertures` (each rectangle mirrored forward across
-    the later mirrors) then :func:`wavepaths.search.beams.quad_side_planes` (inward unit
+    :func:`wavepaths.search.apertures.chain_apertures` (each rectangle mirrored forward across
+    the later mirrors) then :func:`wavepaths.search.apertures.quad_side_planes` (inward unit
     normals; a zero normal for a degenerate plane), per chain without temporaries.
 
     Parameters
@@ -129,7 +129,7 @@ def chain_side_planes(apex: np.ndarray, polys: np.ndarray, quads: np.ndarray, no
     polys : (E, k) int64
         The chains' mirrors, in chain order.
     quads : (p, 4, 3) float64, normal : (p, 3) float64, offset : (p,) float64
-        The scene's polygon rectangles (:func:`wavepaths.search.beams.polygon_quads`) and planes.
+        The scene's polygon rectangles (:func:`wavepaths.search.apertures.polygon_quads`) and planes.
     """
     E, k = polys.shape
     out = np.empty((E, 4 * k, 3))
@@ -183,7 +183,7 @@ def reflection_pairs(scene, level, beams, apertures, clusters, rx: np.ndarray, f
     receivers, chains : (k,) int64
         Rows of ``rx`` and of ``level``, grouped by cluster.
     """
-    from .beams import NODE_ANGLE_SLACK
+    from .spheres import NODE_ANGLE_SLACK
 
     members, start, centre, radius = clusters
     flat = flat_beams(level, beams)
@@ -230,7 +230,7 @@ def chains_meeting_edges(scene, level, apertures, tree, rows: np.ndarray,
 
 
 def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A :class:`~wavepaths.search.beams.SphereTree`'s node levels concatenated: centres
+    """A :class:`~wavepaths.search.spheres.SphereTree`'s node levels concatenated: centres
     (N, 3), radii (N,) and each level's first node (depth + 1,)."""
     return (np.ascontiguousarray(np.concatenate(tree.centre)), np.ascontiguousarray(np.concatenate(tree.radius)),
             np.concatenate([[0], np.cumsum([len(r) for r in tree.radius])]).astype(np.int64))
@@ -265,10 +265,10 @@ def receiver_pairs(
         ``M``, half-length ``h``); the angular test with a 1e-9 rad margin.
     aperture : (planes (E, P, 3), tol) or None
         The side planes of the beams through the images' mirrors' rectangles
-        (:func:`wavepaths.search.beams.quad_side_planes`, inward unit normals through the
+        (:func:`wavepaths.search.apertures.quad_side_planes`, inward unit normals through the
         image): a pair passes unless both edge ends lie outside one plane by more than
         ``1e-9`` of their distance to the image plus ``tol`` [m]
-        (:func:`wavepaths.search.beams.chain_beams_meet`'s segment test).
+        (:func:`wavepaths.search.apertures.chain_beams_meet`'s segment test).
     R : (E, 3) float64
         The same images in scene coordinates [m] (for the Keller window, in the edge frame).
     frame : (origin, direction, x_hat, y_hat), each (D, 3)
