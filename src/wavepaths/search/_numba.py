@@ -475,3 +475,43 @@ def end_sides(images, rows, d, origin, direction, x_hat, y_hat, angles, count, w
         rho_o[n] = np.hypot(x, y)
         n += 1
     return n
+
+
+@numba.njit(cache=True, nogil=True)
+def joined_candidates(lo, hi, first, count, r_t, r_rho, r_phi, r_d, s_t, s_rho, s_phi, length, has_vis, v_lo, v_hi,
+                      v_open0, v_open1, tau, lit_region, out_r, out_s, out_t, rejected):
+    # diffraction._diffraction_prefilter (numpy reference) on the join of diffraction._join_chunks:
+    # for each receiver-side row i in [lo, hi), each transmitter-side source j of the same
+    # (dihedron, sector), the closed-form point t (geometry.diffraction_point_reduced, the same
+    # expression), on the edge segment, not proven hidden (VisibilityWindows.may_see), and,
+    # without the lit region, in the shadow (|phi - phi'| > pi); the survivors are written at
+    # out_*[:n] (n returned), rejected[0..2] count the off-edge, hidden and lit-region ones
+    n = 0
+    for i in range(lo, hi):
+        tr, dr, ph = r_t[i], r_rho[i], r_phi[i]
+        L = length[r_d[i]]
+        for j in range(first[i], first[i] + count[i]):
+            te, de = s_t[j], s_rho[j]
+            den = de + dr
+            if den > 0:
+                num = te * dr
+                num += tr * de
+                t = num / den
+            else:
+                t = 0.5 * (te + tr)
+            if not (t >= 0 and t <= L):
+                rejected[0] += 1
+                continue
+            if has_vis:
+                if not ((t >= v_lo[j] - tau and t <= v_hi[j] + tau) or (v_open0[j] and t <= tau)
+                        or (v_open1[j] and t >= L - tau)):
+                    rejected[1] += 1
+                    continue
+            if not lit_region and not abs(ph - s_phi[j]) > np.pi:
+                rejected[2] += 1
+                continue
+            out_r[n] = i
+            out_s[n] = j
+            out_t[n] = t
+            n += 1
+    return n

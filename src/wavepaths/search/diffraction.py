@@ -76,14 +76,10 @@ def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.
     return src.take(np.nonzero(keep)[0])
 
 
-def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
-    """For each receiver-side key, all transmitter-side sources with the same key, in chunks.
-
-    Yields ``(rows, src_rows)``: the receiver-side row and the transmitter-side row of every
-    match, at most about ``budget`` matches per chunk (a single key with more matches than
-    that comes in one chunk of its own), so that memory stays bounded however many image
-    sources share a (dihedron, sector).
-    """
+def _join_ranges(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
+    """The join of :func:`_join_chunks` as ranges: yields ``(lo, hi, first, count)``, the
+    receiver-side rows ``lo .. hi - 1`` of a chunk, and for every receiver-side row the
+    first transmitter-side row with its key and how many there are (0 without a match)."""
     nu = len(src.unique_keys)
     if nu == 0 or len(keys) == 0:
         return
@@ -99,11 +95,96 @@ def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
         if base >= total:
             return
         hi = max(int(np.searchsorted(ends, base + budget, side="right")), lo + 1)
+        yield lo, hi, first, count
+        lo = hi
+
+
+def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
+    """For each receiver-side key, all transmitter-side sources with the same key, in chunks.
+
+    Yields ``(rows, src_rows)``: the receiver-side row and the transmitter-side row of every
+    match, at most about ``budget`` matches per chunk (a single key with more matches than
+    that comes in one chunk of its own), so that memory stays bounded however many image
+    sources share a (dihedron, sector).
+    """
+    for lo, hi, first, count in _join_ranges(src, keys, budget):
         c = count[lo:hi]
         rows = np.repeat(np.arange(lo, hi), c)
         offs = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
         yield rows, np.repeat(first[lo:hi], c) + offs
-        lo = hi
+
+
+def _diffraction_prefilter(scene: "Scene", ctx: TxContext, rside: _EndSide, rows: np.ndarray, tside: _EndSide,
+                           src_rows: np.ndarray, rejected: np.ndarray):
+    """Steps 2-3 of :func:`diffraction_tile` on joined pairs (receiver side ``rside[rows]``,
+    transmitter side ``tside[src_rows]``): the closed-form point in the reduced coordinates
+    (seed §2.3), on the edge segment, not proven hidden from the transmitter side
+    (order 0: in a shadow proven from the transmitter, the first leg is blocked; order >= 1:
+    the leg to the last image cannot cross the last mirror), and without ``lit_region`` in
+    the shadow region. Returns the survivors' ``rows, src_rows, t``; adds the off-edge,
+    hidden and lit-region rejections to ``rejected`` (3,)."""
+    d = rside.dihedron[rows]
+    t = diffraction_point_reduced(tside.t[src_rows], tside.rho[src_rows], rside.t[rows], rside.rho[rows])
+    L = scene.dihedra.length[d]
+    on = (t >= 0) & (t <= L)
+    rejected[0] += int((~on).sum())
+    if tside.visible is not None:
+        seen = tside.visible.may_see(src_rows, t, L)
+        rejected[1] += int((on & ~seen).sum())
+        on &= seen
+    if not ctx.options.lit_region:
+        shadow = np.abs(rside.phi[rows] - tside.phi[src_rows]) > np.pi
+        rejected[2] += int((on & ~shadow).sum())
+        on &= shadow
+    return rows[on], src_rows[on], t[on]
+
+
+def _joined_candidates(scene: "Scene", ctx: TxContext, a: int, src, rside: _EndSide, tside: _EndSide,
+                       stats: Counter, tag: str):
+    """The join of the two sides on (dihedron, sector) (:func:`_join_chunks`), then
+    :func:`_diffraction_prefilter`, in chunks: yields the survivors' ``rows, src_rows, t``.
+
+    With the compiled kernels the two run as one loop over the join
+    (:func:`wavepaths.search._numba.joined_candidates`, the same expressions), which never
+    materialises the pairs that fail.
+    """
+    keys = rside.dihedron * ctx.key_stride + rside.sector
+    rejected = np.zeros(3, np.int64)
+    compiled = ctx.options.compiled and kernels.available()
+    if compiled:
+        from . import _numba
+
+        vis = tside.visible
+        z = np.zeros(0)
+        zb = np.zeros(0, np.bool_)
+        vis_args = ((True, vis.lo, vis.hi, vis.open0, vis.open1, float(vis.tau)) if vis is not None
+                    else (False, z, z, zb, zb, 0.0))
+        c = np.ascontiguousarray
+        r_args = (c(rside.t), c(rside.rho), c(rside.phi), c(rside.dihedron, dtype=np.int64))
+        s_args = (c(tside.t), c(tside.rho), c(tside.phi))
+        vis_args = (vis_args[0],) + tuple(c(x) for x in vis_args[1:5]) + (vis_args[5],)
+        length = c(scene.dihedra.length)
+    for lo, hi, first, count in _join_ranges(src, keys):
+        m = int(count[lo:hi].sum())
+        stats[f"{tag}_candidates"] += m
+        if compiled:
+            out_r, out_s, out_t = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)
+            n = _numba.joined_candidates(lo, hi, c(first, dtype=np.int64), c(count, dtype=np.int64), *r_args, *s_args,
+                                         length, *vis_args, bool(ctx.options.lit_region), out_r, out_s, out_t,
+                                         rejected)
+            got = out_r[:n], out_s[:n], out_t[:n]
+        else:
+            cc = count[lo:hi]
+            rows = np.repeat(np.arange(lo, hi), cc)
+            src_rows = np.repeat(first[lo:hi], cc) + np.arange(len(rows)) - np.repeat(np.cumsum(cc) - cc, cc)
+            got = _diffraction_prefilter(scene, ctx, rside, rows, tside, src_rows, rejected)
+        if len(got[0]):
+            yield got
+    stats[f"{tag}_rejected_off_edge"] += int(rejected[0])
+    if tside.visible is not None:
+        stats[f"{tag}_rejected_{'hidden' if a == 0 else 'aperture'}"] += int(rejected[1])
+    if not ctx.options.lit_region:
+        stats[f"{tag}_rejected_lit_region"] += int(rejected[2])
 
 
 def diffraction_tile(
@@ -146,7 +227,10 @@ def diffraction_tile(
        (:func:`~wavepaths.topology.sectors.sector_angle`; tests/search check it against
        :func:`~wavepaths.topology.find_dihedron.find_dihedron`);
     3. the closed-form diffraction point (seed §2.3) in the reduced coordinates of the
-       two ends, ``t = (t_e d_r + t_r d_e) / (d_e + d_r)``, on the edge segment;
+       two ends, ``t = (t_e d_r + t_r d_e) / (d_e + d_r)``, on the edge segment, not
+       proven hidden from the transmitter side, in the shadow region without
+       ``lit_region`` (steps 2 and 3 run as one compiled loop with numba:
+       :func:`_joined_candidates`);
     4. the reflection points on both sides by the image method (back-traces);
     5. occlusion of every leg, cast in one batch.
     """
@@ -186,9 +270,9 @@ def diffraction_tile(
             rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag, window)
         else:
             rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
-        for rows, src_rows in _join_chunks(src, rside.dihedron * ctx.key_stride + rside.sector):
+        for rows, src_rows, t in _joined_candidates(scene, ctx, a, src, rside, tside, stats, tag):
             out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
-                                           rside, rows, tside, src_rows, pending)
+                                           rside, rows, tside, src_rows, t, pending)
     return out
 
 
@@ -250,52 +334,32 @@ class PendingDiffraction:
 
 
 def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
-                            rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray,
+                            rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray, t: np.ndarray,
                             pending: list | None = None) -> list[PathBatch]:
-    """Steps 3-5 of :func:`diffraction_tile` on joined candidates (receiver side ``rside[rows]``,
-    transmitter side ``tside[src_rows]``)."""
+    """Steps 4 and 5 of :func:`diffraction_tile` on the candidates that passed
+    :func:`_joined_candidates` (receiver side ``rside[rows]``, transmitter side
+    ``tside[src_rows]``, diffraction points at ``t`` [m along the edge])."""
     dihedra = scene.dihedra
     tx_lv = ctx.levels[a]
-    stats[f"{tag}_candidates"] += len(rows)
-    if len(rows) == 0:
-        return []
-    # closed-form point in the reduced coordinates (seed §2.3), then on the segment
     d = rside.dihedron[rows]
     te, de = tside.t[src_rows], tside.rho[src_rows]
     tr, dr = rside.t[rows], rside.rho[rows]
-    t = diffraction_point_reduced(te, de, tr, dr)
-    on = (t >= 0) & (t <= dihedra.length[d])
-    stats[f"{tag}_rejected_off_edge"] += int((~on).sum())
-    if tside.visible is not None:
-        # order 0: the point lies in a shadow proven from the transmitter (the first leg is
-        # blocked); order >= 1: the leg to the last image cannot cross the last mirror
-        seen = tside.visible.may_see(src_rows, t, dihedra.length[d])
-        stats[f"{tag}_rejected_{'hidden' if a == 0 else 'aperture'}"] += int((on & ~seen).sum())
-        on &= seen
-    rows, src_rows, d, t = rows[on], src_rows[on], d[on], t[on]
     phi, phi_prime = rside.phi[rows], tside.phi[src_rows]
     sec = rside.sector[rows]
-    ok = np.ones(len(rows), dtype=bool)
-    if not ctx.options.lit_region:
-        shadow = np.abs(phi - phi_prime) > np.pi
-        stats[f"{tag}_rejected_lit_region"] += int((~shadow).sum())
-        ok &= shadow
     # GO rays within the float32 uncertainty of the edge: the angular distance to the shadow
     # or reflection boundary times the shorter leg
     wedge = ctx.sectors.width[d, sec]
-    leg = np.minimum(np.hypot(te[on] - t, de[on]), np.hypot(tr[on] - t, dr[on]))
+    leg = np.minimum(np.hypot(te - t, de), np.hypot(tr - t, dr))
     offs = np.minimum(np.abs(np.abs(phi - phi_prime) - np.pi), np.abs(phi + phi_prime - np.pi))
     offs = np.minimum(offs, np.abs(phi + phi_prime - (2 * wedge - np.pi)))
-    near = (offs * leg < 4 * scene.length_tolerance(scene.tolerances.ray_offset)) & ok
+    near = offs * leg < 4 * scene.length_tolerance(scene.tolerances.ray_offset)
     e, c = rside.row[rows], tside.row[src_rows]
     if near.any():
         grazing[tx_lv.source[c[near]], rx_lv.source[e[near]]] = True
         stats["pairs_on_boundaries"] += int(near.sum())
-    e, d, sec, c, t = e[ok], d[ok], sec[ok], c[ok], t[ok]
     amp = None
     if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
-        amp = _diffraction_amplitude_bound(ctx, phi[ok], phi_prime[ok], wedge[ok] / np.pi, te[on][ok], de[on][ok],
-                                           tr[on][ok], dr[on][ok], t)
+        amp = _diffraction_amplitude_bound(ctx, phi, phi_prime, wedge / np.pi, te, de, tr, dr, t)
     P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
     # reflections after (receiver images) and before (transmitter images)
     ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
