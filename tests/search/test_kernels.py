@@ -157,10 +157,13 @@ def test_compiled_chain_side_planes_equal_the_numpy_composition(rng):
 
 @needs_numba
 @pytest.mark.parametrize("order", [1, 2, 3])
-def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng):
+def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng, monkeypatch):
     """beams.reflection_candidates: the same (receiver, chain) pairs and the same culled count,
     compiled (one descent per cluster) or numpy (blocks of (cluster, node) pairs)."""
+    from wavepaths.search import beams
     from wavepaths.search.beams import reflection_candidates
+
+    monkeypatch.setattr(beams, "FLAT_MAX_CLUSTER_SIZE", 0.0)  # the tree, whatever the clusters
 
     scene = load_scene("street_canyon")
     rx = np.concatenate([_receivers(rng, 150), rng.uniform([-90, -8, 1], [90, 8, 30], size=(50, 3))])
@@ -178,6 +181,38 @@ def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng):
     assert len(pairs[True]) > 100 and culled[True] > 0
     assert pairs[True] == pairs[False]
     assert culled[True] == culled[False]
+
+
+@needs_numba
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_flat_reflection_candidates_hold_the_tree_candidates_and_give_the_same_paths(order, rng, monkeypatch):
+    """Scattered receivers (one per cluster): the compiled search tests every (chain, receiver)
+    pair with the point test alone (kernels.reflection_pairs_flat). Its pairs hold every pair
+    of the tree query (which adds bounding-sphere tests), each once, with the same culled
+    count for the pairs it drops; the traced paths are the same."""
+    from wavepaths.search import beams
+    from wavepaths.search.beams import reflection_candidates
+
+    scene = load_scene("street_canyon")
+    rx = np.concatenate([_receivers(rng, 60), rng.uniform([-90, -8, 1], [90, 8, 30], size=(20, 3))])
+    opts = TraceOptions(max_reflections=3, diffraction=False)
+    ctx = build_tx_context(scene, TX, opts)
+    pairs = {}
+    for name, size in (("tree", 0.0), ("flat", 1e9)):
+        monkeypatch.setattr(beams, "FLAT_MAX_CLUSTER_SIZE", size)
+        stats = Counter()
+        got = list(reflection_candidates(scene, ctx, order, rx, stats, 1 << 12))
+        r = np.concatenate([g[0] for g in got])
+        c = np.concatenate([g[1] for g in got])
+        pairs[name] = set(zip(r.tolist(), c.tolist()))
+        assert len(pairs[name]) == len(r)  # each pair once
+        assert stats[f"reflection_order_{order}_culled_beam"] == len(rx) * len(ctx.levels[order]) - len(r)
+    assert len(pairs["tree"]) > 50 and pairs["tree"] <= pairs["flat"]
+    paths = {}
+    for name, size in (("tree", 0.0), ("flat", 1e9)):
+        monkeypatch.setattr(beams, "FLAT_MAX_CLUSTER_SIZE", size)
+        paths[name] = path_keys(trace(scene, TX, rx, opts))
+    assert len(paths["tree"]) > 100 and paths["tree"] == paths["flat"]
 
 
 @needs_numba

@@ -515,3 +515,41 @@ def joined_candidates(lo, hi, first, count, r_t, r_rho, r_phi, r_d, s_t, s_rho, 
             out_t[n] = t
             n += 1
     return n
+
+
+@numba.njit(cache=True, nogil=True)
+def reflection_pairs_flat(rx, last_image, side, mirror, planes, normal, offset, eps, c_lo, c_hi):
+    # reflection_pairs' per-receiver point test alone, for every (chain, receiver) pair of
+    # chains c_lo .. c_hi - 1 (no tree, no sphere tests): the receiver beyond the chain's
+    # last mirror (the side test, with the same margin: 1e-9 of the distance to the last
+    # image plus eps) and inside the side planes of the beams through the chain's mirrors'
+    # rectangles (`planes`, kernels.chain_side_planes). Chain by chain over all receivers,
+    # so each chain's planes are read once; the side test first, over the receivers without
+    # a branch, the distance (a square root) only where the margin decides
+    R = rx.shape[0]
+    P = planes.shape[1]
+    out_r = np.empty(1024, np.int64)
+    out_c = np.empty(1024, np.int64)
+    cnt = 0
+    s_r = np.empty(R)
+    for c in range(c_lo, c_hi):
+        m = mirror[c]
+        sg = side[c]
+        n0, n1, n2, d = normal[m, 0], normal[m, 1], normal[m, 2], offset[m]
+        b0, b1, b2 = last_image[c, 0], last_image[c, 1], last_image[c, 2]
+        for r in range(R):
+            s_r[r] = sg * (rx[r, 0] * n0 + rx[r, 1] * n1 + rx[r, 2] * n2 - d)
+        for r in range(R):
+            x0, x1, x2 = rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2
+            if s_r[r] >= eps:  # beyond the plus-eps margin: the distance term decides
+                if not s_r[r] < 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps:
+                    continue
+            far_x = 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps
+            inside = True
+            for p in range(P):
+                if planes[c, p, 0] * x0 + planes[c, p, 1] * x1 + planes[c, p, 2] * x2 < -far_x:
+                    inside = False
+                    break
+            if inside:
+                out_r, out_c, cnt = _append_pair(out_r, out_c, cnt, r, c)
+    return out_r[:cnt], out_c[:cnt]
