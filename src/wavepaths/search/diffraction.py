@@ -187,6 +187,19 @@ def _joined_candidates(scene: "Scene", ctx: TxContext, a: int, src, rside: _EndS
         stats[f"{tag}_rejected_lit_region"] += int(rejected[2])
 
 
+def spatial_order(level: ImageLevel) -> ImageLevel:
+    """The chains of ``level`` reordered along a Morton curve of their last images.
+
+    The rows of a level are self-contained (source, mirrors, images), so any order gives
+    the same paths; in this one, consecutive receiver images are close in space, which is
+    what the chunks of :func:`diffraction_tile` need, and their gathers read memory in order.
+    """
+    if level.order == 0 or len(level) < 2:
+        return level
+    o = morton_order(level.last)
+    return ImageLevel(level.source[o], level.polygons[o], level.images[o])
+
+
 def diffraction_tile(
     scene: "Scene",
     ctx: TxContext,
@@ -247,12 +260,11 @@ def diffraction_tile(
     # temporaries, the compiled one a single int32 array of the survivors' columns
     per_pair = 1 if (ctx.options.compiled and kernels.available()) else m + 4
     step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
-    # receiver images in Morton order: each chunk is then compact in space, and the Keller-cone
-    # culling below keeps fewer dihedra for it (etoile_crop at depth 3: 608 M -> 327 M pairs
-    # at b = 2); the paths found do not depend on the chunking
-    order = morton_order(rx_lv.last) if b >= 1 else np.arange(len(rx_lv))
+    # receiver images in chunks of consecutive rows: in Morton order (:func:`spatial_order`),
+    # each chunk is compact in space, and the Keller-cone culling below keeps fewer dihedra
+    # for it (etoile_crop at depth 3: 608 M -> 327 M pairs at b = 2)
     for s in range(0, len(rx_lv), step):
-        e_rows = order[s : s + step]
+        e_rows = np.arange(s, min(len(rx_lv), s + step))
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
         # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
         src = src_all

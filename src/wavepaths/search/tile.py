@@ -18,7 +18,7 @@ import numpy as np
 from .beams import reflection_candidates
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
-from .diffraction import diffraction_tile
+from .diffraction import diffraction_tile, spatial_order
 from .images import backtrace, build_image_levels
 from .paths import InteractionType, PathBatch
 
@@ -115,6 +115,7 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     if opts.diffraction and len(ctx.diffracting):
         rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers,
                                        compiled=None if opts.compiled else False)
+        rx_levels = [spatial_order(lv) for lv in rx_levels]
         edges = ctx.edges if opts.diffraction_reflections >= 1 and ctx.apertures is not None else None
         for a in range(opts.diffraction_reflections + 1):
             for b in range(opts.diffraction_reflections + 1 - a):
