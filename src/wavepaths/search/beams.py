@@ -62,6 +62,28 @@ class ChainBeams:
     flat: dict = field(default_factory=dict, compare=False, repr=False)  # the compiled query's flat arrays, built once
 
 
+@dataclass
+class LazyChainBeams:
+    """The :class:`ChainBeams` of one reflection order, built on first use.
+
+    The tree costs about as much to build as a few hundred tree queries save: a query of
+    scattered receivers (:data:`FLAT_MAX_CLUSTER_SIZE`) tests every chain instead and never
+    builds it (``etoile_crop`` at order 3: 1.0 s of the context). ``flat`` holds the
+    compiled queries' arrays (:func:`~wavepaths.search.kernels.flat_beams`,
+    :func:`~wavepaths.search.kernels.flat_chain_planes`), built once each.
+    """
+
+    tree: ChainBeams | None = None
+    flat: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def get(self, scene: "Scene", level: "ImageLevel", apertures: Apertures) -> ChainBeams:
+        """The tree, built now if it was not (the same one for every later call)."""
+        if self.tree is None:
+            self.tree = build_chain_beams(scene, level, apertures.centre, apertures.radius)
+            self.tree.flat.update(self.flat)
+        return self.tree
+
+
 def build_chain_beams(
     scene: "Scene", level: "ImageLevel", centre: np.ndarray, radius: np.ndarray, block: int = 1 << 20
 ) -> ChainBeams:
@@ -239,6 +261,7 @@ def reflection_candidates(
         yield from _reflection_candidates_compiled(scene, ctx, order, rx, stats, budget,
                                                    (members, start, centre, radius))
         return
+    beams = beams.get(scene, lv, ctx.apertures)
     size = np.diff(start)
     kept = 0
     buf_r: list[np.ndarray] = []
@@ -277,10 +300,11 @@ def _reflection_candidates_compiled(scene: "Scene", ctx: "TxContext", order: int
     (:func:`~wavepaths.search.kernels.reflection_pairs_flat`: the point test alone, a
     superset of the tree's pairs, which the back-trace decides alike)."""
     lv = ctx.levels[order]
-    beams = ctx.beams[order]
+    lazy = ctx.beams[order]
     g = len(clusters[2])
     if POINT_TEST and len(rx) < FLAT_MAX_CLUSTER_SIZE * g and len(rx) * len(lv) <= FLAT_MAX_PAIRS:
         # scattered receivers: every (chain, receiver) pair, blocks of chains
+        beams = lazy.tree or lazy
         kernels.flat_chain_planes(scene, lv, beams, ctx.apertures)  # built once, before any thread reads it
         nt = kernels.threads() if len(rx) * len(lv) >= kernels.PARALLEL_MIN_PAIRS else 1
         step = max(1, -(-len(lv) // (4 * nt)))
@@ -289,6 +313,7 @@ def _reflection_candidates_compiled(scene: "Scene", ctx: "TxContext", order: int
         def block(s: int):
             return kernels.reflection_pairs_flat(scene, lv, beams, ctx.apertures, rx, s, min(len(lv), s + step))
     else:
+        beams = lazy.get(scene, lv, ctx.apertures)
         kernels.flat_beams(lv, beams)  # built once, before any thread reads it
         nt = kernels.threads() if g * len(lv) >= kernels.PARALLEL_MIN_PAIRS else 1
         step = max(1, min(COMPILED_CLUSTERS, -(-g // (4 * nt))))

@@ -3,8 +3,9 @@
 A :class:`TxContext` holds, for a set of transmitters:
 
 * the image tree up to the highest reflection order any path type needs;
-* the beams of the reflection orders' chains, in trees (:class:`~wavepaths.search.beams.ChainBeams`)
-  that each receiver tile queries to back-trace only the chains whose last leg can reach it;
+* the beams of the reflection orders' chains, in trees (:class:`~wavepaths.search.beams.ChainBeams`,
+  built on first use: :class:`~wavepaths.search.beams.LazyChainBeams`) that each receiver
+  tile queries to back-trace only the chains whose last leg can reach it;
 * for diffraction, every (image source, dihedron) pair whose source lies in a
   diffracting sector of the dihedron (wider than pi) and, for an image of order >= 1,
   whose edge lies beyond the image's last mirror and inside its beam (the incident leg
@@ -29,7 +30,7 @@ import numpy as np
 
 from ..topology.sectors import SectorTable, sector_of, sector_table
 from .apertures import Apertures, scene_apertures
-from .beams import ChainBeams, build_chain_beams, chains_meeting_edges, edge_tree
+from .beams import LazyChainBeams, chains_meeting_edges, edge_tree
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
 from .visibility import VisibilityWindows, aperture_windows, visibility_windows
@@ -88,7 +89,7 @@ class TxContext:
     diffraction_sources: list[DiffractionSources]
     key_stride: int
     stats: dict = field(default_factory=dict)
-    beams: list = field(default_factory=list)
+    beams: list = field(default_factory=list)  # per reflection order, LazyChainBeams or None (order 0, no chain)
     apertures: Apertures | None = None
     edges: object = None  # SphereTree over the diffracting dihedra's edges (beams.edge_tree), or None
 
@@ -133,9 +134,9 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
     stats.update({f"images_order_{k}": len(lv) for k, lv in enumerate(levels)})
     # beam trees of the reflection orders, for the per-tile culling of (receiver, chain) pairs
     apertures = scene_apertures(scene) if max_order >= 1 else None
-    beams: list[ChainBeams | None] = [None] + [
-        build_chain_beams(scene, levels[k], apertures.centre, apertures.radius) if len(levels[k]) else None
-        for k in range(1, options.max_reflections + 1)
+    # (built on first use: a query of scattered receivers never needs them)
+    beams: list[LazyChainBeams | None] = [None] + [
+        LazyChainBeams() if len(levels[k]) else None for k in range(1, options.max_reflections + 1)
     ]
     # a scene traced without diffraction never builds its dihedra
     diffracting = np.nonzero(scene.dihedra.diffracting)[0] if options.diffraction else np.zeros(0, np.int64)
