@@ -77,10 +77,12 @@ class LazyChainBeams:
     flat: dict = field(default_factory=dict, compare=False, repr=False)
 
     def get(self, scene: "Scene", level: "ImageLevel", apertures: Apertures) -> ChainBeams:
-        """The tree, built now if it was not (the same one for every later call)."""
-        if self.tree is None:
-            self.tree = build_chain_beams(scene, level, apertures.centre, apertures.radius)
-            self.tree.flat.update(self.flat)
+        """The tree, built now if it was not (the same one for every later call, from any thread)."""
+        with kernels.CACHE_LOCK:
+            if self.tree is None:
+                tree = build_chain_beams(scene, level, apertures.centre, apertures.radius)
+                tree.flat.update(self.flat)
+                self.tree = tree
         return self.tree
 
 

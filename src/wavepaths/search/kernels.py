@@ -32,6 +32,11 @@ from typing import Callable, Iterator
 import numpy as np
 
 
+CACHE_LOCK = threading.RLock()
+"""Held while a query builds a cache it shares with other tiles (the chain-beam trees and
+the compiled queries' arrays, built on first use): :func:`wavepaths.search.trace` may run
+tiles on several threads."""
+
 PARALLEL_MIN_PAIRS = 1 << 17
 """Pairs below which a kernel runs on the calling thread: starting the threads costs more
 than they save on small calls (the street-canyon map ran 1.3x slower with them at a few
@@ -146,12 +151,13 @@ def flat_beams(level, beams) -> dict:
     """The arrays of a :class:`~wavepaths.search.beams.ChainBeams` tree as the compiled query
     reads them (node levels concatenated), built once and kept in ``beams.flat``."""
     flat = beams.flat
-    if "node_c" not in flat:
-        flat["node_c"], flat["node_r"], flat["level_off"] = tree_arrays(beams.apex)
-        flat["through_c"] = np.ascontiguousarray(np.stack([np.concatenate(t.centre) for t in beams.through]))
-        flat["through_r"] = np.ascontiguousarray(np.stack([np.concatenate(t.radius) for t in beams.through]))
-        flat["last_image"] = np.ascontiguousarray(level.images[:, -1])
-        flat["polys"] = np.ascontiguousarray(level.polygons, dtype=np.int64)
+    with CACHE_LOCK:
+        if "polys" not in flat:
+            flat["node_c"], flat["node_r"], flat["level_off"] = tree_arrays(beams.apex)
+            flat["through_c"] = np.ascontiguousarray(np.stack([np.concatenate(t.centre) for t in beams.through]))
+            flat["through_r"] = np.ascontiguousarray(np.stack([np.concatenate(t.radius) for t in beams.through]))
+            flat["last_image"] = np.ascontiguousarray(level.images[:, -1])
+            flat["polys"] = np.ascontiguousarray(level.polygons, dtype=np.int64)  # set last: the others are ready
     return flat
 
 
@@ -232,15 +238,16 @@ def flat_chain_planes(scene, level, beams, apertures) -> dict:
     (E,), the side of the last image on them (E,), the side planes (E, 4k, 3)), built once per
     level and kept in ``beams.flat``; call it before threads read them."""
     flat = beams.flat
-    if "planes" not in flat:
-        last = np.ascontiguousarray(level.images[:, -1])
-        mirror = np.ascontiguousarray(level.polygons[:, -1], dtype=np.int64)
-        n, d = scene.polygon_normal[mirror], scene.polygon_offset[mirror]
-        flat["side"] = np.sign(np.einsum("ij,ij->i", last, n) - d)
-        flat["mirror"] = mirror
-        flat["last_image"] = last
-        flat["planes"] = chain_side_planes(last, level.polygons, apertures.quads, scene.polygon_normal,
-                                           scene.polygon_offset)
+    with CACHE_LOCK:
+        if "planes" not in flat:
+            last = np.ascontiguousarray(level.images[:, -1])
+            mirror = np.ascontiguousarray(level.polygons[:, -1], dtype=np.int64)
+            n, d = scene.polygon_normal[mirror], scene.polygon_offset[mirror]
+            flat["side"] = np.sign(np.einsum("ij,ij->i", last, n) - d)
+            flat["mirror"] = mirror
+            flat["last_image"] = last
+            flat["planes"] = chain_side_planes(last, level.polygons, apertures.quads, scene.polygon_normal,
+                                               scene.polygon_offset)  # set last: the others are ready
     return flat
 
 

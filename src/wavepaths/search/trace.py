@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import WavepathsError
 from ..scene.model import Scene
+from . import kernels
 from .context import TxContext, build_tx_context
 from .options import TraceOptions
 from .paths import Paths, assemble
@@ -142,6 +143,7 @@ def trace(
     *,
     context: TxContext | None = None,
     progress: Callable[[int], None] | None = None,
+    threads: int | None = None,
 ) -> Paths:
     """Find every propagation path from each transmitter to each receiver.
 
@@ -160,6 +162,12 @@ def trace(
         :func:`~wavepaths.search.context.build_tx_context` for these ``tx`` and options.
     progress : callable, optional
         Called with the number of receivers finished after each tile.
+    threads : int, optional
+        Receiver tiles traced at once, on threads of this process (the compiled kernels and
+        numpy's array work release the GIL). Default: the compiled kernels' thread count
+        (:func:`wavepaths.search.kernels.threads`, the cores numba uses; 1 without numba).
+        With more than one, the receivers are cut into at least two tiles per thread (tiles
+        of at most ``options.rx_batch``), and the paths are the same as with ``threads=1``.
 
     Returns
     -------
@@ -194,10 +202,25 @@ def trace(
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
     stats: Counter = Counter(ctx.stats)
     batches = []
-    for s in range(0, len(rx), opts.rx_batch):
-        b, st = trace_tile(scene, ctx, rx[s : s + opts.rx_batch], s)
+    n_threads = kernels.threads() if threads is None else int(threads)
+    if n_threads < 1:
+        raise WavepathsError(f"`threads` must be positive, got {threads}")
+    size = opts.rx_batch
+    if n_threads > 1 and len(rx) >= 4 * n_threads:
+        # two tiles per thread at least, so that the threads stay busy to the end
+        size = min(size, -(-len(rx) // (2 * n_threads)))
+    else:
+        n_threads = 1
+    starts = list(range(0, len(rx), size))
+    if n_threads > 1:
+        _ = scene.raycaster, scene.exact_raycaster  # the casters built once here, not by two tiles at once
+
+    def tile(s: int):
+        return trace_tile(scene, ctx, rx[s : s + size], s)
+
+    for s, (b, st) in zip(starts, kernels.in_threads(tile, starts, n_threads)):
         batches += b
         stats.update(st)
         if progress is not None:
-            progress(min(len(rx), s + opts.rx_batch))
+            progress(min(len(rx), s + size))
     return assemble(tx, rx, batches, dict(stats))
