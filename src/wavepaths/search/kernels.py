@@ -1,6 +1,6 @@
 """Optional compiled kernels (numba) for the densest loops of the path search.
 
-The numpy code is the reference. Four loops are outer products whose numpy form
+The numpy code is the reference. The loops here are outer products whose numpy form
 materialises large temporaries per chunk (on this machine a fresh array costs about 12 ns
 per element in page faults alone); here each runs pair by pair, with the same tests and
 margins and an early exit:
@@ -11,8 +11,16 @@ margins and an early exit:
   beams through the image's mirrors' rectangles (:func:`chain_side_planes`);
 * :func:`reflection_pairs`: the reflection candidates, (receiver clusters x chain-beam
   tree) (:func:`wavepaths.search.beams.beams_reaching` and the per-receiver point test);
+* :func:`reflection_pairs_flat`: the same candidates for scattered receivers, every
+  (chain, receiver) pair with the point test alone (no tree);
 * :func:`chains_meeting_edges`: (image chains x edge tree)
   (:func:`wavepaths.search.beams.chains_meeting_edges`).
+
+Three more compiled loops, called from their modules with the numpy reference beside them:
+the image trees' exact tests (``_numba.admissible``, :mod:`wavepaths.search.images`), the
+receiver side's frame and sector lookup (``_numba.end_sides``,
+:mod:`wavepaths.search.end_sides`) and the join of the two sides with the closed-form
+point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
 ``TraceOptions(compiled=False)``, the numpy reference runs and finds the same paths.
