@@ -155,28 +155,35 @@ def test_compiled_chain_side_planes_equal_the_numpy_composition(rng):
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
 
 
+def _reflection_pairs(scene, ctx, order: int, rx: np.ndarray):
+    """beams.reflection_candidates as a set of (receiver, chain) pairs, checked to hold each
+    pair once; with how many it yielded and the counters."""
+    from wavepaths.search.beams import reflection_candidates
+
+    stats = Counter()
+    got = list(reflection_candidates(scene, ctx, order, rx, stats, 1 << 12))
+    r = np.concatenate([g[0] for g in got])
+    c = np.concatenate([g[1] for g in got])
+    pairs = set(zip(r.tolist(), c.tolist()))
+    assert len(pairs) == len(r)  # each pair once
+    return pairs, len(r), stats
+
+
 @needs_numba
 @pytest.mark.parametrize("order", [1, 2, 3])
 def test_compiled_reflection_candidates_equal_the_numpy_tree_query(order, rng, monkeypatch):
     """beams.reflection_candidates: the same (receiver, chain) pairs and the same culled count,
     compiled (one descent per cluster) or numpy (blocks of (cluster, node) pairs)."""
     from wavepaths.search import beams
-    from wavepaths.search.beams import reflection_candidates
 
     monkeypatch.setattr(beams, "FLAT_MAX_CLUSTER_SIZE", 0.0)  # the tree, whatever the clusters
-
     scene = load_scene("street_canyon")
     rx = np.concatenate([_receivers(rng, 150), rng.uniform([-90, -8, 1], [90, 8, 30], size=(50, 3))])
     opts = TraceOptions(max_reflections=3, diffraction=False)
     pairs, culled = {}, {}
     for compiled in (True, False):
         ctx = build_tx_context(scene, TX, opts.with_(compiled=compiled))
-        stats = Counter()
-        got = list(reflection_candidates(scene, ctx, order, rx, stats, 1 << 12))
-        r = np.concatenate([g[0] for g in got])
-        c = np.concatenate([g[1] for g in got])
-        pairs[compiled] = set(zip(r.tolist(), c.tolist()))
-        assert len(pairs[compiled]) == len(r)  # each pair once
+        pairs[compiled], _, stats = _reflection_pairs(scene, ctx, order, rx)
         culled[compiled] = stats[f"reflection_order_{order}_culled_beam"]
     assert len(pairs[True]) > 100 and culled[True] > 0
     assert pairs[True] == pairs[False]
@@ -191,7 +198,6 @@ def test_flat_reflection_candidates_hold_the_tree_candidates_and_give_the_same_p
     of the tree query (which adds bounding-sphere tests), each once, with the same culled
     count for the pairs it drops; the traced paths are the same."""
     from wavepaths.search import beams
-    from wavepaths.search.beams import reflection_candidates
 
     scene = load_scene("street_canyon")
     rx = np.concatenate([_receivers(rng, 60), rng.uniform([-90, -8, 1], [90, 8, 30], size=(20, 3))])
@@ -200,13 +206,8 @@ def test_flat_reflection_candidates_hold_the_tree_candidates_and_give_the_same_p
     pairs = {}
     for name, size in (("tree", 0.0), ("flat", 1e9)):
         monkeypatch.setattr(beams, "FLAT_MAX_CLUSTER_SIZE", size)
-        stats = Counter()
-        got = list(reflection_candidates(scene, ctx, order, rx, stats, 1 << 12))
-        r = np.concatenate([g[0] for g in got])
-        c = np.concatenate([g[1] for g in got])
-        pairs[name] = set(zip(r.tolist(), c.tolist()))
-        assert len(pairs[name]) == len(r)  # each pair once
-        assert stats[f"reflection_order_{order}_culled_beam"] == len(rx) * len(ctx.levels[order]) - len(r)
+        pairs[name], kept, stats = _reflection_pairs(scene, ctx, order, rx)
+        assert stats[f"reflection_order_{order}_culled_beam"] == len(rx) * len(ctx.levels[order]) - kept
     assert len(pairs["tree"]) > 50 and pairs["tree"] <= pairs["flat"]
     paths = {}
     for name, size in (("tree", 0.0), ("flat", 1e9)):
