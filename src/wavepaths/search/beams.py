@@ -224,7 +224,8 @@ RX_CLUSTER = 8  # receivers per cluster in the reflection beam culling
 COMPILED_CLUSTERS = 256  # clusters per call of the compiled query
 # receivers per cluster (on average) below which the compiled search tests every (chain,
 # receiver) pair instead of descending the tree once per cluster: etoile_crop's 100 random
-# receivers (one per cluster) at order 3, 660 k chains, 2.1 s -> 0.7 s (the tree is for
+# receivers (one per cluster) at order 3, 660 k chains, 2.1 s -> 0.7 s plus 0.3 s for the
+# chains' side planes, and the tree's 1.0 s build is saved (the tree is for
 # receivers that share their queries, as a coverage map's do)
 FLAT_MAX_CLUSTER_SIZE = 2.0
 FLAT_MAX_PAIRS = 1 << 30  # and at most this many pairs (about 12 s at 11 ns)
