@@ -216,6 +216,22 @@ def _append_pair(out_a, out_b, cnt, a, b):
     return out_a, out_b, cnt + 1
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _point_in_beam(x0, x1, x2, s, planes, eps):
+    # apertures.chain_beams_meet, point form, for one receiver: x is the receiver minus the
+    # chain's last image, s its signed distance to the last mirror (positive on the image's
+    # side); the receiver must lie beyond the mirror and inside every side plane (`planes`,
+    # inward unit normals through the image), with a margin of 1e-9 of its distance to the
+    # image plus eps
+    far = 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps
+    if not s < far:
+        return False
+    for p in range(planes.shape[0]):
+        if planes[p, 0] * x0 + planes[p, 1] * x1 + planes[p, 2] * x2 < -far:
+            return False
+    return True
+
+
 @numba.njit(cache=True, nogil=True)
 def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, node_c, node_r, through_c,
                      through_r, level_off, leaf_size, branch, node_slack, last_image, polys, cen, rad, quads, normal,
@@ -284,18 +300,10 @@ def reflection_pairs(t_centre, t_radius, members, start, rx, point_test, items, 
                 # each receiver of the cluster as a point (chain_beams_meet, point form)
                 for u in range(start[t], start[t + 1]):
                     r = members[u]
-                    if point_test:
-                        x0, x1, x2 = rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2
-                        far_x = 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps
-                        if not side * (rx[r, 0] * n0 + rx[r, 1] * n1 + rx[r, 2] * n2 - d) < far_x:
-                            continue
-                        inside = True
-                        for p in range(4 * k):
-                            if planes[p, 0] * x0 + planes[p, 1] * x1 + planes[p, 2] * x2 < -far_x:
-                                inside = False
-                                break
-                        if not inside:
-                            continue
+                    if point_test and not _point_in_beam(
+                            rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2,
+                            side * (rx[r, 0] * n0 + rx[r, 1] * n1 + rx[r, 2] * n2 - d), planes, eps):
+                        continue
                     out_r, out_c, cnt = _append_pair(out_r, out_c, cnt, r, c)
     return out_r[:cnt], out_c[:cnt]
 
@@ -519,15 +527,13 @@ def joined_candidates(lo, hi, first, count, r_t, r_rho, r_phi, r_d, s_t, s_rho, 
 
 @numba.njit(cache=True, nogil=True)
 def reflection_pairs_flat(rx, last_image, side, mirror, planes, normal, offset, eps, c_lo, c_hi):
-    # reflection_pairs' per-receiver point test alone, for every (chain, receiver) pair of
-    # chains c_lo .. c_hi - 1 (no tree, no sphere tests): the receiver beyond the chain's
-    # last mirror (the side test, with the same margin: 1e-9 of the distance to the last
-    # image plus eps) and inside the side planes of the beams through the chain's mirrors'
-    # rectangles (`planes`, kernels.chain_side_planes). Chain by chain over all receivers,
-    # so each chain's planes are read once; the side test first, over the receivers without
-    # a branch, the distance (a square root) only where the margin decides
+    # reflection_pairs' per-receiver point test (_point_in_beam) alone, for every (chain,
+    # receiver) pair of chains c_lo .. c_hi - 1 (no tree, no sphere tests), with the side
+    # planes of the beams through the chain's mirrors' rectangles precomputed (`planes`,
+    # kernels.chain_side_planes). Chain by chain over all receivers, so each chain's planes
+    # are read once; the receivers' distances to the last mirror first, in a loop without
+    # a branch
     R = rx.shape[0]
-    P = planes.shape[1]
     out_r = np.empty(1024, np.int64)
     out_c = np.empty(1024, np.int64)
     cnt = 0
@@ -539,17 +545,8 @@ def reflection_pairs_flat(rx, last_image, side, mirror, planes, normal, offset, 
         b0, b1, b2 = last_image[c, 0], last_image[c, 1], last_image[c, 2]
         for r in range(R):
             s_r[r] = sg * (rx[r, 0] * n0 + rx[r, 1] * n1 + rx[r, 2] * n2 - d)
+        pc = planes[c]
         for r in range(R):
-            x0, x1, x2 = rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2
-            if s_r[r] >= eps:  # beyond the plus-eps margin: the distance term decides
-                if not s_r[r] < 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps:
-                    continue
-            far_x = 1e-9 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + eps
-            inside = True
-            for p in range(P):
-                if planes[c, p, 0] * x0 + planes[c, p, 1] * x1 + planes[c, p, 2] * x2 < -far_x:
-                    inside = False
-                    break
-            if inside:
+            if _point_in_beam(rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2, s_r[r], pc, eps):
                 out_r, out_c, cnt = _append_pair(out_r, out_c, cnt, r, c)
     return out_r[:cnt], out_c[:cnt]

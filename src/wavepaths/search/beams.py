@@ -69,8 +69,8 @@ class LazyChainBeams:
     The tree costs about as much to build as a few hundred tree queries save: a query of
     scattered receivers (:data:`FLAT_MAX_CLUSTER_SIZE`) tests every chain instead and never
     builds it (``etoile_crop`` at order 3: 1.0 s of the context). ``flat`` holds the
-    compiled queries' arrays (:func:`~wavepaths.search.kernels.flat_beams`,
-    :func:`~wavepaths.search.kernels.flat_chain_planes`), built once each.
+    flat query's arrays (:func:`~wavepaths.search.kernels.flat_chain_planes`), built once;
+    the tree's compiled arrays are in the tree's own ``flat``.
     """
 
     tree: ChainBeams | None = None
@@ -80,9 +80,7 @@ class LazyChainBeams:
         """The tree, built now if it was not (the same one for every later call, from any thread)."""
         with kernels.CACHE_LOCK:
             if self.tree is None:
-                tree = build_chain_beams(scene, level, apertures.centre, apertures.radius)
-                tree.flat.update(self.flat)
-                self.tree = tree
+                self.tree = build_chain_beams(scene, level, apertures.centre, apertures.radius)
         return self.tree
 
 
@@ -307,14 +305,13 @@ def _reflection_candidates_compiled(scene: "Scene", ctx: "TxContext", order: int
     g = len(clusters[2])
     if POINT_TEST and len(rx) < FLAT_MAX_CLUSTER_SIZE * g and len(rx) * len(lv) <= FLAT_MAX_PAIRS:
         # scattered receivers: every (chain, receiver) pair, blocks of chains
-        beams = lazy.tree or lazy
-        kernels.flat_chain_planes(scene, lv, beams, ctx.apertures)  # built once, before any thread reads it
+        kernels.flat_chain_planes(scene, lv, lazy, ctx.apertures)  # built once, before any thread reads it
         nt = kernels.threads() if len(rx) * len(lv) >= kernels.PARALLEL_MIN_PAIRS else 1
         step = max(1, -(-len(lv) // (4 * nt)))
         items = list(range(0, len(lv), step))
 
         def block(s: int):
-            return kernels.reflection_pairs_flat(scene, lv, beams, ctx.apertures, rx, s, min(len(lv), s + step))
+            return kernels.reflection_pairs_flat(scene, lv, lazy, ctx.apertures, rx, s, min(len(lv), s + step))
     else:
         beams = lazy.get(scene, lv, ctx.apertures)
         kernels.flat_beams(lv, beams)  # built once, before any thread reads it

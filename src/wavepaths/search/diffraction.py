@@ -108,10 +108,15 @@ def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
     sources share a (dihedron, sector).
     """
     for lo, hi, first, count in _join_ranges(src, keys, budget):
-        c = count[lo:hi]
-        rows = np.repeat(np.arange(lo, hi), c)
-        offs = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
-        yield rows, np.repeat(first[lo:hi], c) + offs
+        yield _join_pairs(lo, hi, first, count)
+
+
+def _join_pairs(lo: int, hi: int, first: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (receiver-side row, transmitter-side row) pairs of one range of :func:`_join_ranges`."""
+    c = count[lo:hi]
+    rows = np.repeat(np.arange(lo, hi), c)
+    offs = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+    return rows, np.repeat(first[lo:hi], c) + offs
 
 
 def _diffraction_prefilter(scene: "Scene", ctx: TxContext, rside: _EndSide, rows: np.ndarray, tside: _EndSide,
@@ -154,15 +159,15 @@ def _joined_candidates(scene: "Scene", ctx: TxContext, a: int, src, rside: _EndS
     if compiled:
         from . import _numba
 
-        vis = tside.visible
-        z = np.zeros(0)
-        zb = np.zeros(0, np.bool_)
-        vis_args = ((True, vis.lo, vis.hi, vis.open0, vis.open1, float(vis.tau)) if vis is not None
-                    else (False, z, z, zb, zb, 0.0))
         c = np.ascontiguousarray
+        vis = tside.visible
+        if vis is None:
+            z, zb = np.zeros(0), np.zeros(0, np.bool_)
+            vis_args = (False, z, z, zb, zb, 0.0)
+        else:
+            vis_args = (True, c(vis.lo), c(vis.hi), c(vis.open0), c(vis.open1), float(vis.tau))
         r_args = (c(rside.t), c(rside.rho), c(rside.phi), c(rside.dihedron, dtype=np.int64))
         s_args = (c(tside.t), c(tside.rho), c(tside.phi))
-        vis_args = (vis_args[0],) + tuple(c(x) for x in vis_args[1:5]) + (vis_args[5],)
         length = c(scene.dihedra.length)
     for lo, hi, first, count in _join_ranges(src, keys):
         m = int(count[lo:hi].sum())
@@ -174,9 +179,7 @@ def _joined_candidates(scene: "Scene", ctx: TxContext, a: int, src, rside: _EndS
                                          rejected)
             got = out_r[:n], out_s[:n], out_t[:n]
         else:
-            cc = count[lo:hi]
-            rows = np.repeat(np.arange(lo, hi), cc)
-            src_rows = np.repeat(first[lo:hi], cc) + np.arange(len(rows)) - np.repeat(np.cumsum(cc) - cc, cc)
+            rows, src_rows = _join_pairs(lo, hi, first, count)
             got = _diffraction_prefilter(scene, ctx, rside, rows, tside, src_rows, rejected)
         if len(got[0]):
             yield got

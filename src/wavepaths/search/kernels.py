@@ -214,7 +214,7 @@ def reflection_pairs(scene, level, beams, apertures, clusters, rx: np.ndarray, f
     )
 
 
-def reflection_pairs_flat(scene, level, beams, apertures, rx: np.ndarray, first: int,
+def reflection_pairs_flat(scene, level, lazy, apertures, rx: np.ndarray, first: int,
                           last: int) -> tuple[np.ndarray, np.ndarray]:
     """(receiver, chain) pairs of chains ``first .. last - 1`` whose last legs can reach them, without the tree.
 
@@ -227,25 +227,25 @@ def reflection_pairs_flat(scene, level, beams, apertures, rx: np.ndarray, first:
     back-trace decides both alike.
 
     The chains' side planes, last images and last mirrors' sides are computed once per
-    level and kept in ``beams.flat``.
+    level and kept in ``lazy.flat`` (the level's :class:`~wavepaths.search.beams.LazyChainBeams`).
 
     Returns
     -------
     receivers, chains : (k,) int64
         Rows of ``rx`` and of ``level``, grouped by chain.
     """
-    flat = flat_chain_planes(scene, level, beams, apertures)
+    flat = flat_chain_planes(scene, level, lazy, apertures)
     return _compiled()["reflection_pairs_flat"](
         np.ascontiguousarray(rx, dtype=np.float64), flat["last_image"], flat["side"], flat["mirror"], flat["planes"],
         np.ascontiguousarray(scene.polygon_normal), np.ascontiguousarray(scene.polygon_offset),
         float(scene.length_tolerance(1e-9)), int(first), int(last))
 
 
-def flat_chain_planes(scene, level, beams, apertures) -> dict:
+def flat_chain_planes(scene, level, lazy, apertures) -> dict:
     """The per-chain arrays of :func:`reflection_pairs_flat` (last images (E, 3), last mirrors
     (E,), the side of the last image on them (E,), the side planes (E, 4k, 3)), built once per
-    level and kept in ``beams.flat``; call it before threads read them."""
-    flat = beams.flat
+    level and kept in ``lazy.flat``; call it before threads read them."""
+    flat = lazy.flat
     with CACHE_LOCK:
         if "planes" not in flat:
             last = np.ascontiguousarray(level.images[:, -1])
