@@ -22,6 +22,7 @@ from .weld import degenerate_triangles, weld_vertices
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..raycast import RayCaster
+    from ..search.mirror_visibility import PolygonHulls
     from ..topology.dihedra import Dihedra
 
 
@@ -139,6 +140,13 @@ class Scene:
         from ..search.images import polygon_spheres
 
         return polygon_spheres(self)
+
+    @functools.cached_property
+    def polygon_hulls(self) -> "PolygonHulls":
+        """Convex hulls of the polygons, and which can serve as occluders (hidden mirrors)."""
+        from ..search.mirror_visibility import polygon_hulls
+
+        return polygon_hulls(self)
 
     @functools.cached_property
     def raycaster(self) -> "RayCaster":

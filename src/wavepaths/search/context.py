@@ -130,7 +130,8 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
         max_order = max(max_order, options.diffraction_reflections)
     stats: dict = {}
     levels = build_image_levels(scene, tx, max_order, options.skip_absorbers, stats,
-                                None if options.compiled else False)
+                                None if options.compiled else False,
+                                visibility_group=0 if "mirror_visibility" in options.disable_culling else 1)
     stats.update({f"images_order_{k}": len(lv) for k, lv in enumerate(levels)})
     # beam trees of the reflection orders, for the per-tile culling of (receiver, chain) pairs
     apertures = scene_apertures(scene) if max_order >= 1 else None

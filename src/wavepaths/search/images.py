@@ -196,7 +196,7 @@ def _candidates(
 
 def build_image_levels(
     scene: "Scene", sources: np.ndarray, max_order: int, skip_absorbers: bool = True, stats: dict | None = None,
-    compiled: bool | None = None,
+    compiled: bool | None = None, visibility_group: int = 0,
 ) -> list[ImageLevel]:
     """Image chains of orders ``0..max_order`` for each source point.
 
@@ -221,6 +221,13 @@ def build_image_levels(
     compiled : bool, optional
         Run the exact tests as a compiled loop (numba): by default when numba is installed;
         ``False`` runs the numpy reference; ``True`` without numba raises ``ImportError``.
+    visibility_group : int
+        When positive, drop the order-1 chains whose mirror is proven hidden from every source
+        of its group (``visibility_group`` sources per group, consecutive along a Morton
+        curve; :func:`~wavepaths.search.mirror_visibility.hidden_mirrors`): no path reflects
+        first on a mirror its source cannot see, so no chain of any order starting there is
+        built. Counted in ``stats["images_order_1_culled_hidden"]``. ``0`` keeps them (the
+        chains of :func:`build_image_levels_all_pairs`).
 
     Returns
     -------
@@ -277,8 +284,29 @@ def build_image_levels(
             stats[f"images_order_{k}_candidates"] = stats.get(f"images_order_{k}_candidates", 0) + tested
         chain = np.concatenate(kept_chain) if kept_chain else np.zeros(0, np.int64)
         q = np.concatenate(kept_q) if kept_q else np.zeros(0, np.int64)
+        if k == 1 and visibility_group > 0 and len(chain):
+            seen = _seen_mirrors(scene, sources, visibility_group, chain, q, mirrors, stats)
+            chain, q = chain[seen], q[seen]
         levels.append(_extend(scene, lv, chain, q))
     return levels
+
+
+def _seen_mirrors(scene: "Scene", sources: np.ndarray, size: int, chain: np.ndarray, q: np.ndarray,
+                  mirrors: np.ndarray, stats: dict | None) -> np.ndarray:
+    """(c,) bool: the order-1 chains (source ``chain``, mirror ``q``) whose mirror is not
+    proven hidden from the source's group (see ``visibility_group``)."""
+    from .mirror_visibility import hidden_mirrors, source_groups
+
+    group = source_groups(sources, size)
+    col = np.searchsorted(mirrors, q)
+    wanted = np.zeros((int(group.max()) + 1, len(mirrors)), bool)
+    wanted[group[chain], col] = True
+    hidden, rays = hidden_mirrors(scene, sources, group, mirrors, wanted)
+    seen = ~hidden[group[chain], col]
+    if stats is not None:
+        stats["images_order_1_culled_hidden"] = stats.get("images_order_1_culled_hidden", 0) + int((~seen).sum())
+        stats["mirror_visibility_rays"] = stats.get("mirror_visibility_rays", 0) + rays
+    return seen
 
 
 def _extend(scene: "Scene", lv: ImageLevel, chain: np.ndarray, q: np.ndarray) -> ImageLevel:

@@ -22,6 +22,8 @@ CULLING_TESTS: dict[str, str] = {
                          "candidates whose diffraction point lies in a proven shadow",
     "aperture_window": "(transmitter image, dihedron) pairs whose edge has no point from which a leg to the image "
                        "crosses its last mirror, and candidates whose diffraction point lies outside that window",
+    "mirror_visibility": "(source, mirror) pairs of the image trees, transmitter's and receivers', whose mirror is "
+                         "proven hidden from the source behind one convex polygon (no chain starts there)",
 }
 """The conservative culling tests that :attr:`TraceOptions.disable_culling` can switch off."""
 
@@ -35,6 +37,7 @@ CULLING_COUNTERS: dict[str, str] = {
     "source_beam": r"diffraction_sources_order_\d_culled_beam",
     "source_visibility": r"diffraction_sources_order_\d_culled_hidden|diffraction_\dr_\dr_rejected_hidden",
     "aperture_window": r"diffraction_sources_order_\d_culled_aperture|diffraction_\dr_\dr_rejected_aperture",
+    "mirror_visibility": r"(rx_)?images_order_1_culled_hidden",
 }
 """The ``Paths.stats`` keys (regular expressions) under which each culling test counts what it drops."""
 

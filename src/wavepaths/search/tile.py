@@ -26,6 +26,11 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
 
 
+RX_VISIBILITY_GROUP = 1
+"""Receivers per group of the receivers' hidden-mirror test (``visibility_group`` of
+:func:`~wavepaths.search.images.build_image_levels`): one box and one ray per mirror and group."""
+
+
 def los_tile(
     scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int, stats: Counter, grazing: np.ndarray
 ) -> PathBatch:
@@ -113,8 +118,12 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     batches: list[PathBatch] = []
     grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
-        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers,
-                                       compiled=None if opts.compiled else False)
+        rx_stats: dict = {}
+        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers, rx_stats,
+                                       compiled=None if opts.compiled else False,
+                                       visibility_group=0 if "mirror_visibility" in opts.disable_culling
+                                       else RX_VISIBILITY_GROUP)
+        stats.update({f"rx_{k}": v for k, v in rx_stats.items()})
         rx_levels = [spatial_order(lv) for lv in rx_levels]
         edges = ctx.edges if opts.diffraction_reflections >= 1 and ctx.apertures is not None else None
         for a in range(opts.diffraction_reflections + 1):

@@ -1,0 +1,197 @@
+"""Mirrors proven hidden from sources, and from each other (search/mirror_visibility.py).
+
+Every pair the module calls hidden is checked against the occlusion rule itself (the
+float64 caster) on sampled points of both ends; the tests also require that something is
+culled, so that they could fail.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths.em.materials import PEC
+from wavepaths.raycast.numpy_caster import NumpyRayCaster
+from wavepaths.scene import load_scene
+from wavepaths.scene.builtin import SceneBuilder
+from wavepaths.scene.model import build_scene
+from wavepaths.search import TraceOptions, trace
+from wavepaths.search.images import build_image_levels, reflecting_polygons
+from wavepaths.search.mirror_visibility import MAX_HULL, hidden_mirrors, source_groups
+
+from ..conftest import boxes_scene
+from .helpers import path_keys
+
+
+def _monotone_chain(pts: np.ndarray) -> list[int]:
+    """Reference hull (Andrew's monotone chain, counter-clockwise, collinear points left out)."""
+    order = sorted(range(len(pts)), key=lambda i: (pts[i][0], pts[i][1]))
+
+    def half(seq):
+        out: list[int] = []
+        for i in seq:
+            while len(out) >= 2:
+                a, b, c = pts[out[-2]], pts[out[-1]], pts[i]
+                if (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) <= 0:
+                    out.pop()
+                else:
+                    break
+            out.append(i)
+        return out
+
+    return half(order)[:-1] + half(order[::-1])[:-1]
+
+
+def _city(rng, n: int = 14):
+    """Random boxes (buildings) on a ground square: walls that hide each other."""
+    boxes = []
+    while len(boxes) < n:
+        c = rng.uniform(-60, 60, 2)
+        h = rng.uniform(4, 10, 2)
+        lo, hi = c - h, c + h
+        if any((lo < b[1][:2] + 3).all() and (hi > b[0][:2] - 3).all() for b in boxes):
+            continue
+        boxes.append((np.array([lo[0], lo[1], 0.0]), np.array([hi[0], hi[1], rng.uniform(6, 25)])))
+    return boxes_scene([(tuple(a), tuple(b)) for a, b in boxes], ground=80.0)
+
+
+def _outdoor(rng, scene, n: int, z: float = 1.5) -> np.ndarray:
+    from wavepaths.coverage import inside_solid_objects, solid_objects
+
+    pts = np.column_stack([rng.uniform(-75, 75, 8 * n), rng.uniform(-75, 75, 8 * n), np.full(8 * n, z)])
+    return pts[~inside_solid_objects(scene, pts, solid_objects(scene))][:n]
+
+
+def _points_on(scene, polygon: int, rng, k: int) -> np.ndarray:
+    """(k, 3) random points of ``polygon`` (its triangles, by area), its corners first."""
+    tris = scene.polygon_triangles(polygon)
+    c = scene.vertices[scene.triangles[tris]]
+    corners = np.unique(c.reshape(-1, 3), axis=0)
+    area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    t = rng.choice(len(tris), size=k, p=area / area.sum())
+    u, v = rng.uniform(size=(2, k))
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    pts = c[t, 0] + u[:, None] * (c[t, 1] - c[t, 0]) + v[:, None] * (c[t, 2] - c[t, 0])
+    return np.concatenate([corners, pts])
+
+
+def test_hulls_match_the_monotone_chain_and_turn_about_the_normal():
+    b = SceneBuilder()
+    b.add_box("box", PEC, (0, 0, 0), (4, 3, 2))
+    scene = build_scene(*b.arrays())
+    for s in (scene, load_scene("street_canyon")):
+        hulls = s.polygon_hulls
+        for p in range(s.num_polygons):
+            vid = np.unique(s.triangles[s.polygon_triangles(p)])
+            pts = s.vertices[vid]
+            n = s.polygon_normal[p]
+            u = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+            u /= np.linalg.norm(u)
+            w = np.cross(n, u)
+            xy = np.stack([(pts - pts.mean(0)) @ u, (pts - pts.mean(0)) @ w], 1)
+            ref = _monotone_chain(xy)
+            c = int(hulls.count[p])
+            assert c == len(ref)
+            got = hulls.corners[p, :c]
+            # the same corners, in the same cyclic order
+            start = int(np.argmin(np.linalg.norm(pts[ref] - got[0], axis=1)))
+            np.testing.assert_allclose(got, np.roll(pts[ref], -start, axis=0), atol=1e-12)
+            # counter-clockwise about the normal: inward side normals see every corner inside
+            inside = np.einsum("kj,cj->kc", hulls.edge_normal[p, :c], got) - hulls.edge_offset[p, :c, None]
+            assert (inside >= -1e-9).all()
+            assert hulls.occluder[p]  # boxes and the canyon's walls are convex and planar
+
+
+def test_a_non_convex_polygon_never_occludes():
+    # an L of three coplanar quads, welded into one polygon
+    quads = [[(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)], [(2, 0, 0), (6, 0, 0), (6, 2, 0), (2, 2, 0)],
+             [(0, 2, 0), (2, 2, 0), (2, 6, 0), (0, 6, 0)]]
+    from ..conftest import quads_scene
+
+    scene = quads_scene(quads, objects=[0, 0, 0])
+    assert scene.num_polygons == 1
+    hulls = scene.polygon_hulls
+    assert hulls.count[0] == 5  # the hull of the L (its inner corner left out)
+    assert not hulls.occluder[0]
+
+
+def _groups_of_four(rng, scene, n: int, spread: float = 3.0) -> np.ndarray:
+    """(4 n, 3): n groups of four outdoor points within ``spread`` m of an outdoor centre."""
+    out = []
+    while len(out) < n:
+        c = _outdoor(rng, scene, 1)[0]
+        g = c + np.column_stack([rng.uniform(-spread, spread, (4, 2)), np.zeros(4)])
+        if len(_outdoor_points(scene, g)) == 4:
+            out.append(g)
+    return np.concatenate(out)
+
+
+def _outdoor_points(scene, pts):
+    from wavepaths.coverage import inside_solid_objects, solid_objects
+
+    return pts[~inside_solid_objects(scene, pts, solid_objects(scene))]
+
+
+@pytest.mark.parametrize("size", [1, 4])
+def test_hidden_mirrors_are_hidden_by_the_occlusion_rule(size, rng):
+    """Each (group, mirror) pair called hidden: every sampled point of the mirror (its corners
+    and 40 random points) is blocked from every source of the group, by the float64 rule."""
+    scene = _city(rng)
+    exact = NumpyRayCaster(scene)
+    mirrors = np.nonzero(reflecting_polygons(scene, True))[0]
+    src = _outdoor(rng, scene, 6) if size == 1 else _groups_of_four(rng, scene, 6)
+    group = np.arange(len(src)) // size  # consecutive points, as built
+    hidden, rays = hidden_mirrors(scene, src, group, mirrors)
+    assert rays == hidden.size  # one hint ray per pair (every hull is small here)
+    assert hidden.sum() >= 10, "almost nothing hidden: the test would prove little"
+    assert not hidden.all(axis=1).any()  # and every group still sees something
+    for g, m in zip(*np.nonzero(hidden)):
+        pts = _points_on(scene, int(mirrors[m]), rng, 40)
+        members = src[group == g]
+        a = np.repeat(members, len(pts), axis=0)
+        b = np.tile(pts, (len(members), 1))
+        assert exact.occluded(a, b).all(), (g, m)
+
+
+def test_a_wall_behind_a_wall_is_hidden_and_a_wall_half_behind_is_not():
+    b = SceneBuilder()
+    b.add_quad("front", PEC, [[5, -4, 0], [5, 4, 0], [5, 4, 6], [5, -4, 6]])
+    b.add_quad("behind", PEC, [[10, -3, 1], [10, 3, 1], [10, 3, 4], [10, -3, 4]])
+    b.add_quad("half", PEC, [[10, 2, 1], [10, 12, 1], [10, 12, 4], [10, 2, 4]])
+    scene = build_scene(*b.arrays())
+    S = np.array([[0.0, 0.0, 2.0]])
+    name = {scene.object_names[o]: p for p, o in enumerate(scene.polygon_object)}
+    mirrors = np.array(sorted(name.values()))
+    hidden, _ = hidden_mirrors(scene, S, np.zeros(1, np.int64), mirrors)
+    got = dict(zip([scene.object_names[scene.polygon_object[m]] for m in mirrors], hidden[0]))
+    assert got == {"front": False, "behind": True, "half": False}
+    # a source box reaching past the front wall's edge sees the hidden wall's corner
+    wide = np.array([[0.0, 0.0, 2.0], [0.0, 9.0, 2.0]])
+    hidden, _ = hidden_mirrors(scene, wide, np.zeros(2, np.int64), mirrors)
+    assert not hidden.any()
+
+
+def test_image_trees_with_the_culling_hold_every_chain_that_carries_a_path(rng):
+    """The culled trees are the full ones without the chains that start on a hidden mirror,
+    and a city traced to order 3 with diffraction and two reflections finds the same paths."""
+    scene = _city(rng)
+    tx = np.array([[0.0, 0.0, 30.0]])
+    rx = _outdoor(rng, scene, 12)
+    full = build_image_levels(scene, rx, 2)
+    stats: dict = {}
+    cut = build_image_levels(scene, rx, 2, stats=stats, visibility_group=1)
+    first = {tuple(r) for r in np.column_stack([full[1].source, full[1].polygons]).tolist()}
+    kept_first = {tuple(r) for r in np.column_stack([cut[1].source, cut[1].polygons]).tolist()}
+    assert kept_first <= first
+    assert len(first) - len(kept_first) == stats["images_order_1_culled_hidden"] > 0
+    # order 2: exactly the chains whose first mirror was kept
+    second = {tuple(r) for r in np.column_stack([full[2].source, full[2].polygons]).tolist()}
+    kept_second = {tuple(r) for r in np.column_stack([cut[2].source, cut[2].polygons]).tolist()}
+    assert kept_second == {c for c in second if c[:2] in kept_first}
+    opts = TraceOptions(max_reflections=3, diffraction=True, diffraction_reflections=2, rx_batch=4)
+    on = trace(scene, tx, rx, opts)
+    off = trace(scene, tx, rx, opts.with_(disable_culling={"mirror_visibility"}))
+    assert len(on) > 50
+    assert path_keys(on) == path_keys(off)
+    assert on.stats["rx_images_order_1_culled_hidden"] > 0
