@@ -17,7 +17,7 @@ from wavepaths.scene.builtin import SceneBuilder
 from wavepaths.scene.model import build_scene
 from wavepaths.search import TraceOptions, trace
 from wavepaths.search.images import build_image_levels, reflecting_polygons
-from wavepaths.search.mirror_visibility import MAX_HULL, hidden_mirrors, source_groups
+from wavepaths.search.mirror_visibility import hidden_mirrors
 
 from ..conftest import boxes_scene
 from .helpers import path_keys
