@@ -50,7 +50,7 @@ MAX_HULL = 12
 """Hull corners kept per polygon; a polygon with more neither occludes nor is culled."""
 GROUP_SIZE = 16
 """Sources per group (consecutive along a Morton curve): one box and one ray per mirror."""
-PAIR_BLOCK = 1 << 16
+PAIR_BLOCK = 1 << 14
 """(group, mirror) pairs tested at once (bounds the (pairs, 8, hull, hull) temporaries)."""
 
 
