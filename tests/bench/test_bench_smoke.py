@@ -124,3 +124,17 @@ def test_every_path_query_setting_of_the_tradeoff_sweep_is_accepted_by_trace():
     assert chosen[-1] == WAVEPATHS_SETTINGS[-1]  # the reference is a path setting
     for setting in chosen:
         trace(scene, np.array([[-60.0, 0.0, 10.0]]), np.array([[20.0, 2.0, 1.5]]), trace_options(setting))
+
+
+def test_interleaved_rounds_turn_the_order_so_each_contender_runs_in_each_place():
+    from wavepaths.bench.timing import interleaved
+
+    calls: list[str] = []
+    contenders = {name: (lambda n=name: calls.append(n)) for name in "abc"}
+    times = interleaved(contenders, 3)
+    assert all(len(times[n].times_s) == 3 for n in "abc")
+    rounds = [calls[i : i + 3] for i in range(0, 9, 3)]
+    assert sorted(rounds[0]) == sorted(rounds[1]) == sorted(rounds[2]) == ["a", "b", "c"]
+    # every contender has been first, second and third once
+    for n in "abc":
+        assert sorted(r.index(n) for r in rounds) == [0, 1, 2]

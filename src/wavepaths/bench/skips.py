@@ -35,7 +35,7 @@ def _path_set(p) -> set:
 
 
 
-def run_skips(quick: bool = False, rounds: int = 3, progress=print) -> dict:
+def run_skips(quick: bool = False, rounds: int = 5, progress=print) -> dict:
     """Benchmark 6."""
     from ..fields import FieldConfig, compute_fields
     from ..scene import load_scene

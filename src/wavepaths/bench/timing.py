@@ -52,11 +52,15 @@ class Rounds:
 def interleaved(contenders: dict[str, Callable[[], object]], rounds: int) -> dict[str, Rounds]:
     """Run each contender once per round, in turn, ``rounds`` times; return their wall times.
 
-    Interleaving spreads the machine's load changes over all contenders alike.
+    Interleaving spreads the machine's load changes over all contenders alike. The order
+    turns by one place each round, so that no contender always runs first, or always right
+    after the heaviest one (whose freed memory the next run pays for).
     """
     out = {name: Rounds() for name in contenders}
-    for _ in range(rounds):
-        for name, fn in contenders.items():
+    names = list(contenders)
+    for r in range(rounds):
+        for name in names[r % len(names):] + names[: r % len(names)]:
+            fn = contenders[name]
             gc.collect()
             t0 = time.perf_counter()
             fn()
