@@ -195,3 +195,26 @@ def test_image_trees_with_the_culling_hold_every_chain_that_carries_a_path(rng):
     assert len(on) > 50
     assert path_keys(on) == path_keys(off)
     assert on.stats["rx_images_order_1_culled_hidden"] > 0
+
+
+def test_a_bent_mirror_is_bounded_by_all_its_corners_and_still_culled_behind_a_wall(rng):
+    """A polygon merged from two triangles within the coplanar angle is not flat: the points
+    that bound it are all its corners (a corner inside the hull in the plane may stand off
+    it), and the proof with them still holds, checked by the float64 rule."""
+    from ..conftest import quads_scene
+
+    lift = 5e-6  # inside the coplanar angle (1e-5 rad), far above the plane tolerance (1e-12 diagonal)
+    behind = [(10, -3, 1), (10, 3, 1), (10 + lift, 3, 4), (10, -3, 4)]
+    front = [(5, -4, 0), (5, 4, 0), (5, 4, 6), (5, -4, 6)]
+    scene = quads_scene([front, behind])
+    assert scene.num_polygons == 2
+    hulls = scene.polygon_hulls
+    bent = int(scene.polygon_object.tolist().index(1))
+    assert hulls.num_points[bent] == 4 and not hulls.occluder[bent]
+    got = {tuple(np.round(p, 9)) for p in hulls.points[bent, :4]}
+    assert got == {tuple(map(float, c)) for c in behind}
+    S = np.array([[0.0, 0.0, 2.0]])
+    hidden, _ = hidden_mirrors(scene, S, np.zeros(1, np.int64), np.arange(scene.num_polygons))
+    assert hidden[0, bent] and not hidden[0, 1 - bent]
+    pts = _points_on(scene, bent, rng, 40)
+    assert NumpyRayCaster(scene).occluded(np.repeat(S, len(pts), axis=0), pts).all()

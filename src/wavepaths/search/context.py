@@ -92,6 +92,9 @@ class TxContext:
     beams: list = field(default_factory=list)  # per reflection order, LazyChainBeams or None (order 0, no chain)
     apertures: Apertures | None = None
     edges: object = None  # SphereTree over the diffracting dihedra's edges (beams.edge_tree), or None
+    # per source order a, a SphereTree over the edges that order's sources can reach (the dihedra
+    # of diffraction_sources[a]): the receiver side of (a, b >= 1) queries it instead of `edges`
+    source_edges: list = field(default_factory=list)
 
 
 def _group(keys: np.ndarray):
@@ -199,4 +202,9 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             c, d, key = c[o], d[o], key[o]
             uk, start, count = _group(key)
             sources.append(DiffractionSources(c, d, key, uk, start, count, None if vis is None else vis.take(o)))
-    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures, edges)
+    # the receiver side of a diffracted path whose sources are of order a needs only the edges
+    # those sources reach (on munich, 5,123 of 36,329 at order 0): a tree over them each
+    source_edges = [edge_tree(scene, np.unique(src.dihedron)) if len(src.dihedron) else None for src in sources] \
+        if edges is not None else []
+    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures, edges,
+                     source_edges)

@@ -11,7 +11,8 @@ edge) pair per diffracting edge.
 
 What is proven (:func:`hidden_mirrors`). A group of sources (the receivers of a compact
 part of a tile, or one transmitter) is bounded by its box ``B`` (corners ``b_i``); a mirror
-by the convex hull of its corners (``p_j``). An occluder ``Q`` is a convex, planar polygon
+``P`` by the convex hull of points ``p_j`` (its hull's corners when it is planar, else all its
+corners, :attr:`PolygonHulls.points`). An occluder ``Q`` is a convex, planar polygon
 of the scene. When ``B`` lies strictly on one side of ``Q``'s plane, ``P`` strictly on the
 other, and every segment ``b_i -> p_j`` crosses that plane strictly inside ``Q``, then
 *every* segment from a point of ``B`` to a point of ``P`` crosses ``Q``'s interior: for a
@@ -71,6 +72,13 @@ class PolygonHulls:
         ``edge_normal[k] @ corners[k]``; ``-inf`` past ``count`` (a test every point passes).
     centre : (p, 3) float64
         The mean of the hull's corners [m] (where the hint rays aim).
+    points : (p, MAX_HULL, 3) float64
+        Points whose convex hull holds the polygon [m]: the hull's corners when every corner
+        lies within the plane tolerance of the polygon's plane, else all its corners (a
+        polygon merged within the coplanar angle is not flat: a corner inside the hull in
+        the plane can stand off it); rows past ``num_points`` repeat the last point.
+    num_points : (p,) int64
+        How many (0 when they would be more than ``MAX_HULL``: the polygon is never culled).
     occluder : (p,) bool
         The polygon is convex (its triangles cover its hull) and planar (every corner within
         the plane tolerance of its plane), with at most ``MAX_HULL`` corners: it can serve
@@ -82,6 +90,8 @@ class PolygonHulls:
     edge_normal: np.ndarray
     edge_offset: np.ndarray
     centre: np.ndarray
+    points: np.ndarray
+    num_points: np.ndarray
     occluder: np.ndarray
 
 
@@ -131,6 +141,8 @@ def polygon_hulls(scene: "Scene") -> PolygonHulls:
     corners = np.zeros((p, MAX_HULL, 3))
     count = np.zeros(p, np.int64)
     occluder = np.zeros(p, bool)
+    points = np.zeros((p, MAX_HULL, 3))
+    num_points = np.zeros(p, np.int64)
     n_all, d_all = scene.polygon_normal, scene.polygon_offset
     tv = scene.vertices[scene.triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]), axis=1)
@@ -167,6 +179,14 @@ def polygon_hulls(scene: "Scene") -> PolygonHulls:
         good = poly[fits]
         corners[good] = v[rows, h][fits]
         count[good] = length[fits]
+        # the points that bound the polygon: the hull's corners if flat, else every corner
+        points[good] = corners[good]
+        num_points[good] = np.where(planar, length, 0)[fits]
+        if m <= MAX_HULL:
+            bent = poly[~planar]
+            points[bent, :m] = v[~planar]
+            points[bent, m:] = v[~planar][:, -1:]
+            num_points[bent] = m
         occluder[good] = (planar & (hull_area > 0) & (np.abs(hull_area - area[poly]) <= 1e-9 * hull_area))[fits]
     # inward side normals: n x (c[k+1] - c[k]) for a counter-clockwise hull about n (u, w, n right-handed)
     nxt = np.roll(corners, -1, axis=1)
@@ -180,7 +200,7 @@ def polygon_hulls(scene: "Scene") -> PolygonHulls:
     edge_offset = np.where(valid, np.einsum("pkj,pkj->pk", edge_normal, corners), -np.inf)
     real = np.arange(MAX_HULL)[None, :, None] < count[:, None, None]
     centre = np.where(real, corners, 0.0).sum(axis=1) / np.maximum(count, 1)[:, None]
-    return PolygonHulls(corners, count, edge_normal, edge_offset, centre, occluder)
+    return PolygonHulls(corners, count, edge_normal, edge_offset, centre, points, num_points, occluder)
 
 
 def source_groups(sources: np.ndarray, size: int = GROUP_SIZE) -> np.ndarray:
@@ -235,7 +255,7 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     hulls = scene.polygon_hulls
     margin = 1e-9 * scene.diagonal
     gi, mi = np.nonzero(candidates) if candidates is not None else np.divmod(np.arange(g * m), m)
-    ok = hulls.count[mirrors[mi]] > 0
+    ok = hulls.num_points[mirrors[mi]] > 0
     gi, mi = gi[ok], mi[ok]
     rays = 0
     for s in range(0, len(gi), PAIR_BLOCK):
@@ -256,19 +276,20 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
 def _behind(scene: "Scene", hulls: PolygonHulls, box: np.ndarray, P: np.ndarray, Q: np.ndarray,
             margin: float) -> np.ndarray:
     """(k,) bool: every segment from the box corners ``box`` (k, c, 3) to the hull of polygon
-    ``P`` crosses the convex polygon ``Q``'s interior, with ``margin`` to spare (the module's proof).
+    ``P``'s points crosses the convex polygon ``Q``'s interior, with ``margin`` to spare (the
+    module's proof).
 
-    Pairs are taken by their hulls' corner counts, so the arrays hold no padding."""
+    Pairs are taken by their point and corner counts, so the arrays hold no padding."""
     n = scene.polygon_normal[Q]
     d = scene.polygon_offset[Q]
     sb = np.einsum("kij,kj->ki", box, n) - d[:, None]  # (k, c)
     sign = np.sign(sb[:, 0])
     ok = (sign[:, None] * sb > margin).all(axis=1)
-    cp, cq = hulls.count[P], hulls.count[Q]
+    cp, cq = hulls.num_points[P], hulls.count[Q]
     for a in np.unique(cp[ok]):
         for e in np.unique(cq[ok & (cp == a)]):
             idx = np.nonzero(ok & (cp == a) & (cq == e))[0]
-            pc = hulls.corners[P[idx], :a]  # (k, a, 3)
+            pc = hulls.points[P[idx], :a]  # (k, a, 3)
             sp = np.einsum("kij,kj->ki", pc, n[idx]) - d[idx, None]  # (k, a)
             beyond = (sign[idx, None] * sp < -margin).all(axis=1)
             ok[idx[~beyond]] = False
