@@ -218,3 +218,20 @@ def test_a_bent_mirror_is_bounded_by_all_its_corners_and_still_culled_behind_a_w
     assert hidden[0, bent] and not hidden[0, 1 - bent]
     pts = _points_on(scene, bent, rng, 40)
     assert NumpyRayCaster(scene).occluded(np.repeat(S, len(pts), axis=0), pts).all()
+
+
+@pytest.mark.parametrize("size", [1, 4])
+def test_the_compiled_proof_decides_every_pair_as_the_numpy_reference(size, rng):
+    from wavepaths.search import kernels
+
+    if not kernels.available():
+        pytest.skip("numba (the `fast` extra) is not installed")
+    scene = _city(rng, 18)
+    mirrors = np.nonzero(reflecting_polygons(scene, True))[0]
+    src = _outdoor(rng, scene, 12) if size == 1 else _groups_of_four(rng, scene, 8)
+    group = np.arange(len(src)) // size
+    ref, rays_ref = hidden_mirrors(scene, src, group, mirrors, compiled=False)
+    got, rays = hidden_mirrors(scene, src, group, mirrors, compiled=True)
+    assert ref.sum() >= 10
+    assert rays == rays_ref
+    assert np.array_equal(got, ref)

@@ -550,3 +550,50 @@ def reflection_pairs_flat(rx, last_image, side, mirror, planes, normal, offset, 
             if _point_in_beam(rx[r, 0] - b0, rx[r, 1] - b1, rx[r, 2] - b2, s_r[r], pc, eps):
                 out_r, out_c, cnt = _append_pair(out_r, out_c, cnt, r, c)
     return out_r[:cnt], out_c[:cnt]
+
+
+@numba.njit(cache=True, nogil=True)
+def behind(box, P, Q, points, num_points, normal, offset, edge_normal, edge_offset, count, margin, out):
+    # mirror_visibility._behind (numpy reference), pair by pair with an early exit: the box's
+    # corners strictly on one side of Q's plane, P's points strictly on the other, and every
+    # (corner, point) segment crossing the plane inside Q's sides, all by `margin`
+    k, c = box.shape[0], box.shape[1]
+    for i in range(k):
+        p, q = P[i], Q[i]
+        n0, n1, n2, d = normal[q, 0], normal[q, 1], normal[q, 2], offset[q]
+        s0 = (box[i, 0, 0] * n0 + box[i, 0, 1] * n1 + box[i, 0, 2] * n2) - d
+        sign = 1.0 if s0 > 0 else (-1.0 if s0 < 0 else 0.0)
+        ok = True
+        for u in range(c):
+            su = (box[i, u, 0] * n0 + box[i, u, 1] * n1 + box[i, u, 2] * n2) - d
+            if not sign * su > margin:
+                ok = False
+                break
+        a = num_points[p]
+        if ok:
+            for v in range(a):
+                sv = (points[p, v, 0] * n0 + points[p, v, 1] * n1 + points[p, v, 2] * n2) - d
+                if not sign * sv < -margin:
+                    ok = False
+                    break
+        e = count[q]
+        u = 0
+        while ok and u < c:
+            b0, b1, b2 = box[i, u, 0], box[i, u, 1], box[i, u, 2]
+            su = (b0 * n0 + b1 * n1 + b2 * n2) - d
+            for v in range(a):
+                sv = (points[p, v, 0] * n0 + points[p, v, 1] * n1 + points[p, v, 2] * n2) - d
+                t = su / (su - sv)
+                x0 = b0 + t * (points[p, v, 0] - b0)
+                x1 = b1 + t * (points[p, v, 1] - b1)
+                x2 = b2 + t * (points[p, v, 2] - b2)
+                for f in range(e):
+                    if not (x0 * edge_normal[q, f, 0] + x1 * edge_normal[q, f, 1] + x2 * edge_normal[q, f, 2])\
+                            - edge_offset[q, f] >= margin:
+                        ok = False
+                        break
+                if not ok:
+                    break
+            u += 1
+        out[i] = ok
+    return out

@@ -285,14 +285,14 @@ def build_image_levels(
         chain = np.concatenate(kept_chain) if kept_chain else np.zeros(0, np.int64)
         q = np.concatenate(kept_q) if kept_q else np.zeros(0, np.int64)
         if k == 1 and visibility_group > 0 and len(chain):
-            seen = _seen_mirrors(scene, sources, visibility_group, chain, q, mirrors, stats)
+            seen = _seen_mirrors(scene, sources, visibility_group, chain, q, mirrors, stats, compiled)
             chain, q = chain[seen], q[seen]
         levels.append(_extend(scene, lv, chain, q))
     return levels
 
 
 def _seen_mirrors(scene: "Scene", sources: np.ndarray, size: int, chain: np.ndarray, q: np.ndarray,
-                  mirrors: np.ndarray, stats: dict | None) -> np.ndarray:
+                  mirrors: np.ndarray, stats: dict | None, compiled: bool) -> np.ndarray:
     """(c,) bool: the order-1 chains (source ``chain``, mirror ``q``) whose mirror is not
     proven hidden from the source's group (see ``visibility_group``)."""
     from .mirror_visibility import hidden_mirrors, source_groups
@@ -301,7 +301,7 @@ def _seen_mirrors(scene: "Scene", sources: np.ndarray, size: int, chain: np.ndar
     col = np.searchsorted(mirrors, q)
     wanted = np.zeros((int(group.max()) + 1, len(mirrors)), bool)
     wanted[group[chain], col] = True
-    hidden, rays = hidden_mirrors(scene, sources, group, mirrors, wanted)
+    hidden, rays = hidden_mirrors(scene, sources, group, mirrors, wanted, compiled)
     seen = ~hidden[group[chain], col]
     if stats is not None:
         stats["images_order_1_culled_hidden"] = stats.get("images_order_1_culled_hidden", 0) + int((~seen).sum())

@@ -16,11 +16,12 @@ margins and an early exit:
 * :func:`chains_meeting_edges`: (image chains x edge tree)
   (:func:`wavepaths.search.beams.chains_meeting_edges`).
 
-Three more compiled loops, called from their modules with the numpy reference beside them:
+Four more compiled loops, called from their modules with the numpy reference beside them:
 the image trees' exact tests (``_numba.admissible``, :mod:`wavepaths.search.images`), the
 receiver side's frame and sector lookup (``_numba.end_sides``,
-:mod:`wavepaths.search.end_sides`) and the join of the two sides with the closed-form
-point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`).
+:mod:`wavepaths.search.end_sides`), the join of the two sides with the closed-form
+point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`) and the proof that
+a mirror is hidden from a source (``_numba.behind``, :mod:`wavepaths.search.mirror_visibility`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
 ``TraceOptions(compiled=False)``, the numpy reference runs and finds the same paths.

@@ -214,7 +214,7 @@ def source_groups(sources: np.ndarray, size: int = GROUP_SIZE) -> np.ndarray:
 
 
 def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirrors: np.ndarray,
-                   candidates: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                   candidates: np.ndarray | None = None, compiled: bool | None = None) -> tuple[np.ndarray, int]:
     """Which (group, mirror) pairs are proven hidden: every point of the mirror from every source of the group.
 
     Parameters
@@ -228,6 +228,9 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
         Polygons to test.
     candidates : (g, m) bool, optional
         Only these pairs are tested (the others are reported not hidden); default all.
+    compiled : bool, optional
+        Run the proof pair by pair as a compiled loop (``_numba.behind``, numba): by default
+        when numba is installed; ``False`` runs the numpy reference (:func:`_behind`).
 
     Returns
     -------
@@ -254,6 +257,13 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     centre = 0.5 * (lo + hi)
     hulls = scene.polygon_hulls
     margin = 1e-9 * scene.diagonal
+    from . import kernels
+
+    kernel = None
+    if compiled is not False and kernels.available():
+        from ._numba import behind as kernel
+    elif compiled:
+        raise ImportError("hidden_mirrors(compiled=True) needs numba (pip install 'wavepaths[fast]')")
     gi, mi = np.nonzero(candidates) if candidates is not None else np.divmod(np.arange(g * m), m)
     ok = hulls.num_points[mirrors[mi]] > 0
     gi, mi = gi[ok], mi[ok]
@@ -269,7 +279,15 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
         idx = np.nonzero(use)[0]
         if len(idx) == 0:
             continue
-        hidden[G[idx], M[idx]] = _behind(scene, hulls, box[G[idx]], P[idx], Q[idx], margin)
+        if kernel is None:
+            hidden[G[idx], M[idx]] = _behind(scene, hulls, box[G[idx]], P[idx], Q[idx], margin)
+        else:
+            out = np.empty(len(idx), np.bool_)
+            c = np.ascontiguousarray
+            kernel(c(box[G[idx]]), c(P[idx], dtype=np.int64), c(Q[idx], dtype=np.int64), hulls.points,
+                   hulls.num_points, scene.polygon_normal, scene.polygon_offset, hulls.edge_normal,
+                   hulls.edge_offset, hulls.count, float(margin), out)
+            hidden[G[idx], M[idx]] = out
     return hidden, rays
 
 
