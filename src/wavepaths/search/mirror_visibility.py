@@ -31,6 +31,10 @@ of mirrors (no leg from ``p`` to ``q``). Tried on ``munich`` and dropped: from t
 transmitter it decided 3.6 M pairs (26 s) to cull 4 % of the order-2 chains; one convex
 occluder rarely covers every leg between two walls.
 
+The image trees use groups of one source (a transmitter, or one receiver: see
+``RX_VISIBILITY_GROUP`` in :mod:`wavepaths.search.tile`): on munich, groups of one drop 96 %
+of a 16-cell tile's order-1 receiver images, groups of sixteen (a 6 m box) 20 %.
+
 Which occluder. One ray per (group, mirror) pair, from the group's centre to the mirror's
 centre, cast by Embree (float32): the first polygon it meets is the candidate ``Q``, a hint
 only; the test above decides in float64. A mirror behind two walls that each cover part of
@@ -43,6 +47,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from . import kernels
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -257,8 +263,6 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     centre = 0.5 * (lo + hi)
     hulls = scene.polygon_hulls
     margin = 1e-9 * scene.diagonal
-    from . import kernels
-
     kernel = None
     if compiled is not False and kernels.available():
         from ._numba import behind as kernel
