@@ -194,8 +194,17 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             elif windows:
                 stats[f"diffraction_sources_order_{a}_culled_aperture"] = culled_aperture
                 lo, hi = (np.concatenate(x) if x else np.zeros(0) for x in (kept_lo, kept_hi))
-                none = np.zeros(len(c), dtype=bool)
-                vis = VisibilityWindows(lo, hi, none, none, scene.length_tolerance(1e-9), 0, 0)
+                if "source_visibility" in options.disable_culling:
+                    none = np.zeros(len(c), dtype=bool)
+                    vis = VisibilityWindows(lo, hi, none, none, scene.length_tolerance(1e-9), 0, 0)
+                else:
+                    # the leg from the last mirror to the edge: the part of each aperture window
+                    # not proven hidden beyond the mirror; pairs hidden along all of it go
+                    vis = visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
+                    seen = ~vis.hidden
+                    stats[f"diffraction_sources_order_{a}_culled_hidden"] = int((~seen).sum())
+                    stats["visibility_rays"] = stats.get("visibility_rays", 0) + vis.rays
+                    c, d, sec, vis = c[seen], d[seen], sec[seen], vis.take(np.nonzero(seen)[0])
             stats[f"diffraction_sources_order_{a}_kept"] = int(len(c))
             key = d * stride + sec
             o = np.lexsort((c, key))

@@ -18,8 +18,9 @@ CULLING_TESTS: dict[str, str] = {
     "keller_window": "(receiver image, dihedron) pairs whose diffraction point falls off the edge for every source",
     "reflection_beam": "(receiver, image chain) pairs whose receiver no beam of the chain can reach",
     "source_beam": "(transmitter image, dihedron) pairs whose edge lies outside the image's beam",
-    "source_visibility": "(transmitter, dihedron) pairs whose edge is proven hidden from the transmitter, and "
-                         "candidates whose diffraction point lies in a proven shadow",
+    "source_visibility": "(transmitter, dihedron) pairs whose edge is proven hidden from the transmitter, "
+                         "(transmitter image, dihedron) pairs whose edge is proven hidden beyond the image's last "
+                         "mirror, and candidates whose diffraction point lies in a proven shadow",
     "aperture_window": "(transmitter image, dihedron) pairs whose edge has no point from which a leg to the image "
                        "crosses its last mirror, and candidates whose diffraction point lies outside that window",
     "mirror_visibility": "(source, mirror) pairs of the image trees, transmitter's and receivers', whose mirror is "

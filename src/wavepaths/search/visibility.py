@@ -23,6 +23,14 @@ The same half-spaces, with the margins reversed, give the *aperture window* of a
 (:func:`aperture_windows`): where on an edge a leg toward the image can cross the image's
 last mirror.
 
+Image sources (``through``). For a transmitter image of order ``a >= 1`` the leg to the
+edge starts on the image's last mirror, where the segment from the image crosses the
+mirror's plane; the same march runs from the image, within the aperture window, with the
+hint rays starting just beyond the mirror and only faces lying wholly beyond the mirror's
+plane admitted, each with a check that the leg's start stands off the face's plane by its
+tolerance (:func:`_beyond_mirror`). On munich, half of the 794 k order-1 (image, dihedron)
+pairs are proven hidden this way (7 s once per transmitter).
+
 What is proven. The shadow intervals are shrunk by margins so that the occlusion rule
 blocks every point of them. The shadows of two triangles of one wall meet at their common
 edge, where the rule's closed triangles block the segment, but their proven intervals
@@ -205,7 +213,9 @@ edge) shadows nothing.
     return np.where(valid, lo, np.inf), np.where(valid, hi, -np.inf)
 
 
-def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds: int = MAX_ROUNDS) -> VisibilityWindows:
+def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds: int = MAX_ROUNDS,
+                       start: tuple[np.ndarray, np.ndarray] | None = None,
+                       through: np.ndarray | None = None) -> VisibilityWindows:
     """The part of edge ``d[i]`` not proven hidden from the point ``S[i]`` (see the module docstring).
 
     Parameters
@@ -217,18 +227,32 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         Dihedra.
     max_rounds : int
         March steps per edge end.
+    start : ((k,), (k,)) float64, optional
+        The windows to start from (``[lo, hi]`` in metres along the edge; default the whole
+        edge): the result lies within them.
+    through : (k,) int64, optional
+        For image sources (order >= 1): the polygon of each source's last mirror. The leg
+        to the edge then starts on that mirror, where the segment ``S -> E`` crosses its
+        plane, and only what lies beyond the mirror can block it (see
+        :func:`_beyond_mirror`): the hint rays start there, and a face is used only when
+        all of it lies beyond the mirror's plane and the leg's start is proven off the
+        face's plane. The ends are decided by the occlusion rule on the leg from the
+        mirror's plane (an end whose segment from ``S`` does not cross it is kept open).
 
     Returns
     -------
     VisibilityWindows
         With a caster that gives no first-triangle hints (the numpy caster), every
-        window is the whole edge.
+        window is the starting one.
     """
     S = np.asarray(S, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(d, dtype=np.int64)
     dihedra = scene.dihedra
     L = dihedra.length[d].astype(np.float64)
-    lo, hi = np.zeros(len(d)), L.copy()
+    if start is None:
+        lo, hi = np.zeros(len(d)), L.copy()
+    else:
+        lo, hi = np.array(start[0], dtype=np.float64), np.array(start[1], dtype=np.float64)
     caster = scene.raycaster
     first = getattr(caster, "first_triangle", None)
     exact = getattr(caster, "exact", None)
@@ -238,6 +262,10 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         return VisibilityWindows(lo, hi, seen, seen.copy(), tau, 0, 0)
     c0 = exact.center
     Sr, A, w = S - c0, dihedra.origin[d] - c0, dihedra.direction[d]
+    if through is not None:
+        pn = scene.polygon_normal[through]
+        po = scene.polygon_offset[through] - pn @ c0
+        dmax = np.maximum(np.linalg.norm(A - Sr, axis=1), np.linalg.norm(A + L[:, None] * w - Sr, axis=1))
     step = 2 * tau
     moving = np.ones((2, len(d)), dtype=bool)  # left end, right end
     reach_l, reach_r = lo.copy(), hi.copy()  # nominal extent of the shadows that moved each end
@@ -251,11 +279,18 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         idx = np.concatenate([il, ir])
         probe = np.concatenate([np.minimum(reach_l[il] + step, hi[il]), np.maximum(reach_r[ir] - step, lo[ir])])
         E = A[idx] + probe[:, None] * w[idx]
-        tri = first(S[idx], E + c0)
+        if through is None:
+            tri = first(S[idx], E + c0)
+        else:  # from just beyond the mirror, where the leg starts
+            X, _ = _mirror_crossing(Sr[idx], E, pn[idx], po[idx])
+            tri = first(X + MIRROR_STEP * (E - X) + c0, E + c0)
         rays += len(idx)
         hit = tri >= 0
         s_lo, s_hi = np.full(len(idx), np.inf), np.full(len(idx), -np.inf)
         n_lo, n_hi = s_lo.copy(), s_hi.copy()
+        if through is not None and hit.any():
+            h = np.nonzero(hit)[0]
+            hit[h] = _beyond_mirror(exact, tri[h], Sr[idx[h]], pn[idx[h]], po[idx[h]], dmax[idx[h]])
         if hit.any():
             h = np.nonzero(hit)[0]
             args = (exact, Sr[idx[h]], tri[h], A[idx[h]], w[idx[h]], L[idx[h]])
@@ -273,9 +308,51 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         reach_r[ir[adv_r]] = np.minimum(n_lo[nl:], s_lo[nl:])[adv_r]
         moving[1, ir[~adv_r]] = False
     ends = np.concatenate([dihedra.origin[d], dihedra.origin[d] + L[:, None] * w])
-    open_ends = ~caster.occluded(np.concatenate([S, S]), ends)
+    if through is None:
+        open_ends = ~caster.occluded(np.concatenate([S, S]), ends)
+    else:  # the leg from the mirror's plane; kept open where the segment does not cross it
+        X, crosses = _mirror_crossing(np.concatenate([Sr, Sr]), ends - c0, np.concatenate([pn, pn]),
+                                      np.concatenate([po, po]))
+        open_ends = ~crosses | ~caster.occluded(X + c0, ends)
     rays += 2 * len(d)
     return VisibilityWindows(lo, hi, open_ends[: len(d)], open_ends[len(d):], tau, rays, rounds)
+
+
+MIRROR_STEP = 1e-4
+"""Where an image source's hint ray starts: this fraction of the leg beyond the mirror's
+plane, clear of the mirror in float32 (a hint only: a face skipped is a shadow not used)."""
+
+
+def _mirror_crossing(S: np.ndarray, E: np.ndarray, n: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the segments ``S -> E`` (k, 3) cross the planes ``n.x = off``: points (k, 3), and
+    (k,) bool whether they cross strictly between their ends (else the point is ``S``)."""
+    s_s = np.einsum("ij,ij->i", n, S) - off
+    s_e = np.einsum("ij,ij->i", n, E) - off
+    crosses = (s_s * s_e < 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(crosses, s_s / (s_s - s_e), 0.0)
+    return S + u[:, None] * (E - S), crosses
+
+
+def _beyond_mirror(exact: "ExactSegments", tri: np.ndarray, S: np.ndarray, pn: np.ndarray, po: np.ndarray,
+                   dmax: np.ndarray) -> np.ndarray:
+    """(k,) bool: triangle ``tri`` may prove a shadow for the leg of image ``S`` (recentred)
+    that starts on the mirror plane ``pn.x = po`` (image sources, ``through``).
+
+    The leg runs from ``X`` on the mirror's plane to ``E`` on the edge, along the segment
+    ``S -> E``. If every corner of the triangle lies beyond that plane (on the side away
+    from ``S``) by ``delta > 0``, the crossing ``Y`` of ``S -> E`` with the triangle, which
+    the proven shadow puts inside it, lies beyond ``X``: ``Y`` is on the leg. The rule also
+    needs ``X`` off the triangle's plane by its tolerance ``tol``: along the segment the
+    signed distance to that plane falls linearly from ``s_S`` at ``S`` to 0 at ``Y``, so at
+    ``X`` it is ``|s_S| |XY| / |SY|``, with ``|XY| >= delta`` and ``|SY| <= dmax`` (the
+    farther edge end from ``S``); ``|s_S| delta > 4 tol dmax`` makes it at least ``4 tol``.
+    """
+    c = exact.corners[tri]  # (k, 3, 3), recentred like S
+    side = np.sign(np.einsum("ij,ij->i", pn, S) - po)
+    delta = (-side[:, None] * (np.einsum("kcj,kj->kc", c, pn) - po[:, None])).min(axis=1)
+    s_s = np.abs(np.einsum("ij,ij->i", exact.normal[tri], S) - exact.offset[tri])
+    return (side != 0) & (delta > 0) & (s_s * delta > 4 * exact.tol[tri] * dmax)
 
 
 APERTURE_MAX_TRIANGLES = 16
