@@ -229,7 +229,8 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         March steps per edge end.
     start : ((k,), (k,)) float64, optional
         The windows to start from (``[lo, hi]`` in metres along the edge; default the whole
-        edge): the result lies within them.
+        edge): the result lies within them, and an edge end outside them (by more than
+        ``tau``) is never open.
     through : (k,) int64, optional
         For image sources (order >= 1): the polygon of each source's last mirror. The leg
         to the edge then starts on that mirror, where the segment ``S -> E`` crosses its
@@ -314,6 +315,8 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         X, crosses = _mirror_crossing(np.concatenate([Sr, Sr]), ends - c0, np.concatenate([pn, pn]),
                                       np.concatenate([po, po]))
         open_ends = ~crosses | ~caster.occluded(X + c0, ends)
+    if start is not None:  # an end outside the starting window stays outside
+        open_ends &= np.concatenate([np.asarray(start[0]) <= tau, np.asarray(start[1]) >= L - tau])
     rays += 2 * len(d)
     return VisibilityWindows(lo, hi, open_ends[: len(d)], open_ends[len(d):], tau, rays, rounds)
 
