@@ -91,9 +91,9 @@ class TxContext:
     stats: dict = field(default_factory=dict)
     beams: list = field(default_factory=list)  # per reflection order, LazyChainBeams or None (order 0, no chain)
     apertures: Apertures | None = None
-    edges: object = None  # SphereTree over the diffracting dihedra's edges (beams.edge_tree), or None
     # per source order a, a SphereTree over the edges that order's sources can reach (the dihedra
-    # of diffraction_sources[a]): the receiver side of (a, b >= 1) queries it instead of `edges`
+    # of diffraction_sources[a], beams.edge_tree), or None without sources: the receiver side of
+    # (a, b >= 1) queries it; empty without diffraction
     source_edges: list = field(default_factory=list)
 
 
@@ -215,5 +215,5 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
     # those sources reach (on munich, 5,123 of 36,329 at order 0): a tree over them each
     source_edges = [edge_tree(scene, np.unique(src.dihedron)) if len(src.dihedron) else None for src in sources] \
         if edges is not None else []
-    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures, edges,
+    return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures,
                      source_edges)

@@ -222,7 +222,8 @@ def diffraction_tile(
     appended to it as :class:`PendingDiffraction` (with their amplitude bounds) instead of
     being cast: :func:`finish_diffraction` casts them later.
 
-    ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over ``ctx.diffracting``; with it
+    ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over the dihedra of the
+    order-``a`` sources (``ctx.source_edges[a]``); with it
     (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
     queries instead of the dense product when there are more than
     ``DENSE_RECEIVER_SIDE_MAX_DIHEDRA`` candidate dihedra.

@@ -125,10 +125,10 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
                                        else RX_VISIBILITY_GROUP)
         stats.update({f"rx_{k}": v for k, v in rx_stats.items()})
         rx_levels = [spatial_order(lv) for lv in rx_levels]
-        tree = opts.diffraction_reflections >= 1 and ctx.apertures is not None
+        tree = opts.diffraction_reflections >= 1 and ctx.apertures is not None and bool(ctx.source_edges)
         for a in range(opts.diffraction_reflections + 1):
             # the receiver side queries the edges that the order-a sources reach
-            edges = (ctx.source_edges[a] if a < len(ctx.source_edges) else ctx.edges) if tree else None
+            edges = ctx.source_edges[a] if tree else None
             for b in range(opts.diffraction_reflections + 1 - a):
                 batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges,
                                             pending)

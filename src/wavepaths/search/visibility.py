@@ -51,6 +51,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .geometry import segment_plane_intersection
+
 if TYPE_CHECKING:  # pragma: no cover
     from ..raycast.numpy_caster import ExactSegments
     from ..scene.model import Scene
@@ -328,13 +330,10 @@ plane, clear of the mirror in float32 (a hint only: a face skipped is a shadow n
 
 def _mirror_crossing(S: np.ndarray, E: np.ndarray, n: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where the segments ``S -> E`` (k, 3) cross the planes ``n.x = off``: points (k, 3), and
-    (k,) bool whether they cross strictly between their ends (else the point is ``S``)."""
-    s_s = np.einsum("ij,ij->i", n, S) - off
-    s_e = np.einsum("ij,ij->i", n, E) - off
-    crosses = (s_s * s_e < 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.where(crosses, s_s / (s_s - s_e), 0.0)
-    return S + u[:, None] * (E - S), crosses
+    (k,) bool whether they cross strictly between their ends
+    (:func:`~wavepaths.search.geometry.segment_plane_intersection`)."""
+    X, t = segment_plane_intersection(S, E, n, off)
+    return X, (t > 0) & (t < 1)
 
 
 def _beyond_mirror(exact: "ExactSegments", tri: np.ndarray, S: np.ndarray, pn: np.ndarray, po: np.ndarray,
