@@ -23,4 +23,4 @@ else
   .venv/bin/python -m pip install --quiet -e ".[fast]"
 fi
 echo "== compiling the numba kernels (cached: once per machine)"
-.venv/bin/python -c "from wavepaths.search import kernels; print('   compiled' if kernels.warm_up() else '   numba not installed: the numpy reference runs')"
+.venv/bin/python -c "from wavepaths.search import kernels; from wavepaths.fields import compiled; print('   compiled' if kernels.warm_up() and compiled.warm_up() else '   numba not installed: the numpy reference runs')"

@@ -37,6 +37,7 @@ from ..em.polarization import spherical_unit_vectors
 from ..em.sionna_compat import sionna_face_coefficients
 from ..em.utd import diffraction_jones, luebbers_face_coefficients
 from ..search.paths import InteractionType, Paths
+from . import compiled as _compiled
 from .config import FieldConfig
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -62,6 +63,14 @@ def _perp_unit(a: np.ndarray, b: np.ndarray, fallback: np.ndarray) -> np.ndarray
 def _apply_reflection(scene: "Scene", cfg: FieldConfig, E: np.ndarray, k_in, k_out, polygon) -> np.ndarray:
     """Reflect field vectors ``E`` (k, p, 3) on ``polygon`` (k,)."""
     n = scene.polygon_normal[polygon]
+    if _compiled.use_compiled(cfg):
+        from . import _numba
+
+        mats = scene.polygon_material[polygon]
+        out = np.ascontiguousarray(E, dtype=np.complex128)
+        _numba.reflect(out, np.ascontiguousarray(k_in), np.ascontiguousarray(k_out), np.ascontiguousarray(n),
+                       mats, *_compiled.material_tables(scene, cfg, mats), cfg.reflection_model == "slab")
+        return out
     cos_t = np.abs(_dot(k_in, n))
     e_s = _perp_unit(k_in, n, _perp_unit(n, np.array([0.0, 0.0, 1.0]) + 0 * n, np.array([1.0, 0.0, 0.0])))
     p_i = np.cross(e_s, k_in)
@@ -212,6 +221,8 @@ def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, 
     dih = scene.dihedra
     mat0 = scene.triangle_material[dih.face_triangle[g["face_0"]]]
     matn = scene.triangle_material[dih.face_triangle[g["face_n"]]]
+    if cfg.model == "utd" and cfg.compat == "none" and _compiled.use_compiled(cfg):
+        return _diffract_compiled(scene, cfg, E, g, L, mat0, matn)
     jones = np.empty((len(rows), 2, 2), complex)
     for m0, mn in set(zip(mat0.tolist(), matn.tolist())):
         sel = (mat0 == m0) & (matn == mn)
@@ -235,6 +246,24 @@ def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, 
     return ob[..., None] * b_out[:, None, :] + op[..., None] * phi_out[:, None, :]
 
 
+def _diffract_compiled(scene: "Scene", cfg: FieldConfig, E, g: dict, L, mat0, matn) -> np.ndarray:
+    """The tail of :func:`_apply_diffraction` (model ``"utd"``) in :func:`wavepaths.fields._numba.diffract`."""
+    from ..em.utd import _prepare
+    from . import _numba
+
+    # the reference's input checks (finite angles, 1 < n <= 2, L >= 0), with its messages
+    _prepare(g["phi"], g["phi_prime"], g["beta_0"], g["n"], cfg.wavenumber, L)
+    c = np.ascontiguousarray
+    out = c(E, dtype=np.complex128)
+    tables = _compiled.material_tables(scene, cfg, np.concatenate([mat0, matn]))
+    _numba.diffract(np.uint64(_compiled.erfcx_address()), out, c(g["e"]), c(g["s_in"]), c(g["s_out"]),
+                    c(scene.dihedra.face_direction[g["face_0"]]), c(g["phi"], dtype=float),
+                    c(g["phi_prime"], dtype=float), c(g["beta_0"], dtype=float), c(g["n"], dtype=float),
+                    c(L, dtype=float), float(cfg.wavenumber), SIN_BETA_0_FLOOR, mat0, matn, *tables,
+                    cfg.reflection_model == "slab")
+    return out
+
+
 def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[np.ndarray, np.ndarray]:
     """Field vectors at the receiver and the spreading factor of each path.
 
@@ -245,7 +274,6 @@ def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[
         (before spreading and the lambda / 4 pi factor).
     spreading : (N,) float64 [1/m]
     """
-    n = len(paths)
     seg = paths.segment_lengths  # (N, D + 1)
     dirs = np.diff(paths.vertices, axis=1)
     dirs = dirs / np.where(seg > 0, seg, 1.0)[..., None]
@@ -292,7 +320,7 @@ def transfer_matrices(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndar
     from ..em.antennas import Antenna
 
     vcfg = FieldConfig(cfg.frequency_hz, cfg.model, cfg.compat, cfg.reflection_model,
-                       Antenna("iso", "VH"), Antenna("iso", "VH"), cfg.tx_power_dbm)
+                       Antenna("iso", "VH"), Antenna("iso", "VH"), cfg.tx_power_dbm, cfg.compiled)
     E, spreading = path_field_vectors(scene, paths, vcfg)  # ports: theta, phi unit fields
     basis = spherical_unit_vectors(paths.arrival_directions)
     out = np.empty((len(paths), 2, 2), complex)

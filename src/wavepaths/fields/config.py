@@ -38,6 +38,10 @@ class FieldConfig:
     tx_antenna, rx_antenna : Antenna
     tx_power_dbm : float
         Transmit power for received power and field strength [dBm].
+    compiled : bool
+        Run the reflections and the ``"utd"`` diffraction (without the Sionna compat mode)
+        in the compiled kernels of :mod:`wavepaths.fields.compiled` when numba is installed
+        (the same formulas; ``False`` runs the numpy reference).
     """
 
     frequency_hz: float = 3.5e9
@@ -47,6 +51,7 @@ class FieldConfig:
     tx_antenna: Antenna = field(default_factory=Antenna)
     rx_antenna: Antenna = field(default_factory=Antenna)
     tx_power_dbm: float = 0.0
+    compiled: bool = True
 
     def __post_init__(self) -> None:
         if not (self.frequency_hz > 0 and self.frequency_hz < 1e13):

@@ -1,0 +1,227 @@
+"""The numba kernels behind :mod:`wavepaths.fields.compiled` (imported only when numba is installed).
+
+Each function is the compiled twin of a numpy reference named in its docstring, with the
+same formulas term for term (the references' docstrings give them and their sources).
+The Faddeeva function is scipy's own (``scipy.special.cython_special.erfcx``), called
+through its C entry point, whose address is passed in at run time (``erfcx_addr``) so
+that the cached machine code never holds a stale address.
+"""
+
+import cmath
+import math
+
+import llvmlite.ir as ir
+import numba
+import numpy as np
+from numba import types
+from numba.extending import intrinsic
+
+KIND_DIELECTRIC = 0
+KIND_PEC = 1
+KIND_ABSORBER = 2
+
+_TINY = 1e-200  # wavepaths.em.fresnel._TINY
+_F_ASYMPTOTIC_X = 1e8  # wavepaths.em.utd._F_ASYMPTOTIC_X
+_E_PI4 = complex(math.cos(0.25 * math.pi), math.sin(0.25 * math.pi))
+_E_MPI4 = complex(math.cos(0.25 * math.pi), -math.sin(0.25 * math.pi))
+_SQRT_PI = math.sqrt(math.pi)
+
+
+@intrinsic
+def _call_erfcx(typingctx, addr, re, im):
+    """Call ``double complex erfcx(double complex, int)`` at address ``addr``.
+
+    A C99 ``double complex`` (or Cython's two-double struct) is passed and returned in two
+    floating-point registers on x86-64 and aarch64, as two doubles are: the function is
+    declared with two double arguments and a two-double struct result.
+    :func:`wavepaths.fields.compiled.available` checks the result against scipy once.
+    """
+    sig = types.UniTuple(types.float64, 2)(types.uint64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = ir.DoubleType()
+        fnty = ir.FunctionType(ir.LiteralStructType([d, d]), [d, d, ir.IntType(32)])
+        ptr = builder.inttoptr(args[0], fnty.as_pointer())
+        res = builder.call(ptr, [args[1], args[2], ir.Constant(ir.IntType(32), 0)])
+        return context.make_tuple(builder, signature.return_type,
+                                  [builder.extract_value(res, 0), builder.extract_value(res, 1)])
+
+    return sig, codegen
+
+
+@numba.njit(cache=True, nogil=True)
+def erfcx(addr, z):
+    """scipy.special.erfcx(z) for complex ``z``."""
+    a, b = _call_erfcx(addr, z.real, z.imag)
+    return complex(a, b)
+
+
+@numba.njit(cache=True, nogil=True)
+def erfcx_array(addr, z):
+    """:func:`erfcx` over an array (for the self-check against scipy)."""
+    out = np.empty(z.shape, np.complex128)
+    for i in range(z.size):
+        out[i] = erfcx(addr, z[i])
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _g(addr, x):
+    # wavepaths.em.utd._g: G(x) = F(x)/sqrt(x)
+    if x > _F_ASYMPTOTIC_X:
+        return (1.0 + 0.5j / x - 0.75 / x / x) / math.sqrt(x)
+    return _E_PI4 * _SQRT_PI * erfcx(addr, _E_PI4 * math.sqrt(x))
+
+
+@numba.njit(cache=True, nogil=True)
+def _sinc(x):
+    if x == 0.0:
+        return 1.0
+    y = math.pi * x
+    return math.sin(y) / y
+
+
+@numba.njit(cache=True, nogil=True)
+def _cot_f(addr, eps, n, kl):
+    # wavepaths.em.utd._cot_f: cot(eps/2n) F(2 kL sin^2(eps/2)), 0 at eps = 0
+    if eps == 0.0:
+        return 0j
+    ratio = n * _sinc(eps / (2.0 * math.pi)) / _sinc(eps / (2.0 * math.pi * n))
+    s = math.sin(0.5 * eps)
+    x = 2.0 * kl * s * s
+    sgn = 1.0 if eps > 0.0 else -1.0
+    return sgn * math.sqrt(2.0 * kl) * math.cos(eps / (2.0 * n)) * ratio * _g(addr, x)
+
+
+@numba.njit(cache=True, nogil=True)
+def luebbers(addr, phi, phi_prime, beta_0, n, k, L, r0_s, r0_h, rn_s, rn_h, floor):
+    """(D_s, D_h) of :func:`wavepaths.em.utd.luebbers_coefficients` at one point."""
+    sb = max(abs(math.sin(beta_0)), floor)
+    pref = -_E_MPI4 / (2.0 * n * math.sqrt(2.0 * math.pi * k) * sb)
+    two_pi_n = 2.0 * math.pi * n
+    bm = phi - phi_prime
+    bp = phi + phi_prime
+    kl = k * L
+    # wavepaths.em.utd._epsilons (np.round is round-half-even, as np.rint)
+    t1 = _cot_f(addr, (math.pi + bm) - two_pi_n * np.rint((bm + math.pi) / two_pi_n), n, kl)
+    t2 = _cot_f(addr, (math.pi - bm) + two_pi_n * np.rint((bm - math.pi) / two_pi_n), n, kl)
+    t3 = _cot_f(addr, (math.pi + bp) - two_pi_n * np.rint((bp + math.pi) / two_pi_n), n, kl)
+    t4 = _cot_f(addr, (math.pi - bp) + two_pi_n * np.rint((bp - math.pi) / two_pi_n), n, kl)
+    base = t1 + t2
+    return pref * (base + r0_s * t4 + rn_s * t3), pref * (base + r0_h * t4 + rn_h * t3)
+
+
+@numba.njit(cache=True, nogil=True)
+def _expm1j(z):
+    # numpy's complex expm1: expm1(x) cos(y) - 2 sin^2(y/2) + j e^x sin(y)
+    a = math.sin(0.5 * z.imag)
+    return complex(math.expm1(z.real) * math.cos(z.imag) - 2.0 * a * a, math.exp(z.real) * math.sin(z.imag))
+
+
+@numba.njit(cache=True, nogil=True)
+def fresnel(kind, eta, thickness_over_lambda, slab, c):
+    """(r_te, r_tm) of :func:`wavepaths.em.fresnel.reflection_coefficients` at one angle.
+
+    ``kind``: ``KIND_DIELECTRIC`` (``eta`` used), ``KIND_PEC`` or ``KIND_ABSORBER``;
+    ``slab``: the single-layer slab of thickness ``thickness_over_lambda`` wavelengths, else
+    the half-space.
+    """
+    if kind == KIND_PEC:
+        return -1.0 + 0j, 1.0 + 0j
+    if kind == KIND_ABSORBER:
+        return 0j, 0j
+    c = min(abs(c), 1.0)
+    # _half_space_parts
+    root = cmath.sqrt((eta - 1.0) + c * c)
+    den_te = (c + root) ** 2
+    den_tm = (eta * c + root) ** 2
+    if eta == 1.0 or abs(den_te) < _TINY or abs(den_tm) < _TINY:
+        r_te, r_tm, om_te, om_tm = 0j, 0j, 1.0 + 0j, 1.0 + 0j
+    else:
+        r_te = (1.0 - eta) / den_te
+        r_tm = (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) / den_tm
+        om_te = 4.0 * c * root / den_te
+        om_tm = 4.0 * eta * c * root / den_tm
+    if not slab:
+        return r_te, r_tm
+    # _slab, eqs. (43)-(44)
+    q = (2.0 * math.pi * thickness_over_lambda) * root
+    e1 = cmath.exp(-1j * q)
+    e2 = e1 * e1
+    one_minus_e2 = -_expm1j(-2j * q)
+    den = one_minus_e2 + om_te * e2
+    out_te = r_te if abs(den) < _TINY else r_te * one_minus_e2 / den
+    den = one_minus_e2 + om_tm * e2
+    out_tm = r_tm if abs(den) < _TINY else r_tm * one_minus_e2 / den
+    return out_te, out_tm
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _perp_unit(a0, a1, a2, b0, b1, b2, f0, f1, f2):
+    # wavepaths.fields.chain._perp_unit: unit(a x b), or the fallback where a and b are parallel
+    c0 = a1 * b2 - a2 * b1
+    c1 = a2 * b0 - a0 * b2
+    c2 = a0 * b1 - a1 * b0
+    nn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    if nn > 1e-12:
+        return c0 / nn, c1 / nn, c2 / nn
+    return f0, f1, f2
+
+
+@numba.njit(cache=True, nogil=True)
+def reflect(E, k_in, k_out, normal, material, kinds, etas, thick, slab):
+    """:func:`wavepaths.fields.chain._apply_reflection`, in place on ``E`` (k, P, 3).
+
+    ``normal`` (k, 3) the mirror's unit normal, ``material`` (k,) its material index into
+    ``kinds``, ``etas``, ``thick`` (thickness in wavelengths).
+    """
+    for r in range(E.shape[0]):
+        n0, n1, n2 = normal[r, 0], normal[r, 1], normal[r, 2]
+        ki0, ki1, ki2 = k_in[r, 0], k_in[r, 1], k_in[r, 2]
+        ko0, ko1, ko2 = k_out[r, 0], k_out[r, 1], k_out[r, 2]
+        cos_t = abs(ki0 * n0 + ki1 * n1 + ki2 * n2)
+        f0, f1, f2 = _perp_unit(n0, n1, n2, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
+        s0, s1, s2 = _perp_unit(ki0, ki1, ki2, n0, n1, n2, f0, f1, f2)
+        pi0, pi1, pi2 = s1 * ki2 - s2 * ki1, s2 * ki0 - s0 * ki2, s0 * ki1 - s1 * ki0
+        pr0, pr1, pr2 = s1 * ko2 - s2 * ko1, s2 * ko0 - s0 * ko2, s0 * ko1 - s1 * ko0
+        m = material[r]
+        r_te, r_tm = fresnel(kinds[m], etas[m], thick[m], slab, cos_t)
+        for p in range(E.shape[1]):
+            e0, e1, e2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
+            es = r_te * (e0 * s0 + e1 * s1 + e2 * s2)
+            ep = r_tm * (e0 * pi0 + e1 * pi1 + e2 * pi2)
+            E[r, p, 0] = es * s0 + ep * pr0
+            E[r, p, 1] = es * s1 + ep * pr1
+            E[r, p, 2] = es * s2 + ep * pr2
+
+
+@numba.njit(cache=True, nogil=True)
+def diffract(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
+             kinds, etas, thick, slab):
+    """:func:`wavepaths.fields.chain._apply_diffraction` after the wedge geometry, model
+    ``"utd"`` (Luebbers' face coefficients at their angles,
+    :func:`wavepaths.em.utd.luebbers_face_coefficients`), in place on ``E`` (k, P, 3).
+    """
+    for r in range(E.shape[0]):
+        b0 = beta_0[r]
+        sb = abs(math.sin(b0))
+        nr = n[r]
+        m0, mn = mat_0[r], mat_n[r]
+        r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime[r])))
+        rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi[r])))
+        d_s, d_h = luebbers(addr, phi[r], phi_prime[r], b0, nr, k, L[r], r0_s, r0_h, rn_s, rn_h, floor)
+        e0, e1, e2 = e[r, 0], e[r, 1], e[r, 2]
+        a0, a1, a2 = s_in[r, 0], s_in[r, 1], s_in[r, 2]
+        o0, o1, o2 = s_out[r, 0], s_out[r, 1], s_out[r, 2]
+        f0, f1, f2 = x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2]
+        pi0, pi1, pi2 = _perp_unit(a0, a1, a2, e0, e1, e2, f0, f1, f2)
+        bi0, bi1, bi2 = a1 * pi2 - a2 * pi1, a2 * pi0 - a0 * pi2, a0 * pi1 - a1 * pi0
+        po0, po1, po2 = _perp_unit(e0, e1, e2, o0, o1, o2, f0, f1, f2)
+        bo0, bo1, bo2 = o1 * po2 - o2 * po1, o2 * po0 - o0 * po2, o0 * po1 - o1 * po0
+        for p in range(E.shape[1]):
+            x0, x1, x2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
+            ob = -d_s * (x0 * bi0 + x1 * bi1 + x2 * bi2)
+            op = -d_h * (x0 * pi0 + x1 * pi1 + x2 * pi2)
+            E[r, p, 0] = ob * bo0 + op * po0
+            E[r, p, 1] = ob * bo1 + op * po1
+            E[r, p, 2] = ob * bo2 + op * po2

@@ -1,0 +1,99 @@
+"""Optional compiled kernels (numba) for the field chain.
+
+The numpy code of :mod:`wavepaths.fields.chain`, :mod:`wavepaths.em.fresnel` and
+:mod:`wavepaths.em.utd` is the reference; the kernels in :mod:`wavepaths.fields._numba`
+run the same formulas path by path, without the numpy temporaries (a UTD coefficient is
+about 60 array operations per path in numpy). They cover reflections and the ``"utd"``
+diffraction model without the Sionna compat mode; the other models run in numpy. They
+agree with the reference to rounding (tests/fields/test_fields_compiled.py).
+
+Used when numba is installed (the ``fast`` extra) and ``FieldConfig(compiled=True)`` (the
+default). scipy's Faddeeva function is called from the compiled code through its C entry
+point; :func:`available` checks it against scipy once per process and falls back to numpy
+if it disagrees.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+    from .config import FieldConfig
+
+
+@lru_cache(maxsize=1)
+def erfcx_address() -> int:
+    """Address of scipy's complex ``erfcx`` (``scipy.special.cython_special``)."""
+    from numba.extending import get_cython_function_address
+
+    return int(get_cython_function_address("scipy.special.cython_special", "__pyx_fuse_0erfcx"))
+
+
+@lru_cache(maxsize=1)
+def available() -> bool:
+    """Whether the compiled field kernels can run: numba is installed and the compiled call
+    of scipy's ``erfcx`` returns scipy's values (checked once, on 64 points of the ray
+    ``e^{j pi/4} sqrt(x)`` the UTD transition function uses, and off it)."""
+    try:
+        from . import _numba
+    except ImportError:
+        return False
+    from scipy.special import erfcx
+
+    x = np.geomspace(1e-10, 1e9, 48)
+    z = np.concatenate([np.exp(0.25j * np.pi) * np.sqrt(x), np.linspace(-3, 3, 16) + 1j * np.linspace(2, -1, 16)])
+    try:
+        got = _numba.erfcx_array(np.uint64(erfcx_address()), z)
+    except Exception:  # pragma: no cover - no C entry point on this build of scipy
+        return False
+    return bool(np.allclose(got, erfcx(z), rtol=1e-15, atol=0.0))
+
+
+def use_compiled(cfg: "FieldConfig") -> bool:
+    """Whether ``cfg``'s chain runs compiled (reflections always; diffraction for ``"utd"``
+    without the Sionna compat mode)."""
+    return cfg.compiled and available()
+
+
+def material_tables(scene: "Scene", cfg: "FieldConfig", used: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per material of ``scene.materials``: kind code (int64), complex relative permittivity
+    at ``cfg.frequency_hz`` and thickness in wavelengths. Only the materials ``used`` (indices)
+    are evaluated (a material's permittivity raises outside its frequency range, as the
+    numpy chain does when it meets it); the others keep ``eta = 1`` and are never read."""
+    from ..em.materials import relative_permittivity
+    from . import _numba
+
+    codes = {"pec": _numba.KIND_PEC, "absorber": _numba.KIND_ABSORBER}
+    m = len(scene.materials)
+    kinds = np.zeros(m, np.int64)
+    etas = np.ones(m, np.complex128)
+    thick = np.zeros(m, np.float64)
+    for i in np.unique(used).tolist():
+        mat = scene.materials[i]
+        kinds[i] = codes.get(mat.kind, _numba.KIND_DIELECTRIC)
+        if kinds[i] == _numba.KIND_DIELECTRIC:
+            etas[i] = complex(relative_permittivity(mat, cfg.frequency_hz))
+            thick[i] = float(mat.thickness_m) / cfg.wavelength
+    return kinds, etas, thick
+
+
+def warm_up() -> bool:
+    """Compile the field kernels now (numba caches them: once per machine), on a few paths
+    of the built-in street canyon. ``scripts/setup.sh`` calls it. Returns :func:`available`."""
+    if not available():
+        return False
+    from ..scene import load_scene
+    from ..search import TraceOptions, trace
+    from . import compute_fields
+    from .config import FieldConfig
+
+    scene = load_scene("street_canyon")
+    rx = np.array([[20.0, 0.0, 1.5], [60.0, 5.0, 1.5], [-20.0, 30.0, 1.5]])
+    paths = trace(scene, np.array([[-60.0, 0.0, 10.0]]), rx, TraceOptions(max_reflections=1, diffraction=True))
+    for model in ("slab", "half_space"):
+        compute_fields(scene, paths, FieldConfig(reflection_model=model))
+    return True

@@ -1,0 +1,144 @@
+"""The compiled field kernels against their numpy references (wavepaths.fields.compiled).
+
+The numpy chain (fields.chain, em.fresnel, em.utd) is itself checked against exact
+solutions in test_fields_chain.py and tests/em; here the compiled twin must give the same
+numbers, to rounding, everywhere the reference is defined: every angle, boundary, branch
+(asymptotic transition function, thin slab, grazing, PEC, absorber) and material.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths import TraceOptions, trace
+from wavepaths.em.fresnel import reflection_coefficients
+from wavepaths.em.materials import ABSORBER, PEC, Material, itu_material, relative_permittivity
+from wavepaths.em.utd import luebbers_coefficients
+from wavepaths.fields import FieldConfig, compiled, compute_fields, transfer_matrices
+from wavepaths.scene import load_scene
+
+pytestmark = pytest.mark.skipif(not compiled.available(), reason="numba is not installed (the `fast` extra)")
+
+F = 3.5e9
+
+
+def _close(a, b, rtol):
+    """|a - b| <= rtol * max(|a|, |b|, tiny), elementwise."""
+    a, b = np.asarray(a), np.asarray(b)
+    scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)
+    return np.abs(a - b) <= rtol * scale
+
+
+def test_erfcx_is_scipys():
+    from scipy.special import erfcx
+
+    from wavepaths.fields import _numba
+
+    rng = np.random.default_rng(0)
+    z = rng.normal(scale=5, size=2000) + 1j * rng.normal(scale=5, size=2000)
+    z = np.concatenate([z, np.exp(0.25j * np.pi) * np.sqrt(np.geomspace(1e-300, 1e12, 500)), [0j]])
+    assert np.array_equal(_numba.erfcx_array(np.uint64(compiled.erfcx_address()), z), erfcx(z))
+
+
+MATERIALS = [
+    PEC, ABSORBER, itu_material("concrete"), itu_material("metal"), itu_material("glass", 0.003),
+    itu_material("wood", 0.0), Material("near_vacuum", "custom", a=1.0 + 1e-12), Material("thick", "custom", a=5.0,
+                                                                                         c=0.1, thickness_m=50.0),
+]
+
+
+@pytest.mark.parametrize("slab", [True, False])
+@pytest.mark.parametrize("material", MATERIALS, ids=lambda m: m.name)
+def test_fresnel_kernel_matches_p2040_reference(material, slab):
+    from wavepaths.fields import _numba
+
+    c = np.concatenate([[0.0, 1e-300, 1e-12, 1e-6, 1.0, 1.0 + 5e-10, -0.3], np.linspace(0, 1, 101)])
+    ref = reflection_coefficients(material, F, c, "slab" if slab else "half_space")
+    kind = {"pec": _numba.KIND_PEC, "absorber": _numba.KIND_ABSORBER}.get(material.kind, _numba.KIND_DIELECTRIC)
+    eta = complex(relative_permittivity(material, F)) if kind == _numba.KIND_DIELECTRIC else 1.0 + 0j
+    thick = material.thickness_m / (2.99792458e8 / F)
+    got = np.array([_numba.fresnel(kind, eta, thick, slab, x) for x in c])
+    assert np.all(_close(got[:, 0], ref.r_te, 1e-13)), material.name
+    assert np.all(_close(got[:, 1], ref.r_tm, 1e-13)), material.name
+
+
+def test_luebbers_kernel_matches_the_reference_on_boundaries_and_both_branches():
+    from wavepaths.fields import _numba
+
+    rng = np.random.default_rng(3)
+    m = 4000
+    n = rng.choice([1.0 + 1e-9, 1.2, 1.5, 1.75, 2.0], m)
+    pp = rng.uniform(0, 1, m) * n * np.pi
+    phi = rng.uniform(0, 1, m) * n * np.pi
+    # a quarter of the observers exactly on (or 1e-12 rad from) a shadow or reflection boundary
+    on = rng.integers(0, 4, m)
+    bnd = np.choose(on % 3, [pp + np.pi, np.pi - pp, (2 * n - 1) * np.pi - pp])
+    pick = (on == 0) & (bnd >= 0) & (bnd <= n * np.pi)
+    phi = np.where(pick, bnd + rng.choice([0.0, 1e-12, -1e-12], m), phi)
+    b0 = rng.choice([np.pi / 2, 1e-9, np.pi - 1e-3, 0.7], m)
+    L = rng.choice([0.0, 1e-6, 1.0, 300.0, 1e9], m)  # 1e9 m: F's asymptotic branch
+    k = 2 * np.pi * F / 2.99792458e8
+    r = rng.normal(size=(4, m)) * 0.4 + 1j * rng.normal(size=(4, m)) * 0.4
+    ref = luebbers_coefficients(phi, pp, b0, n, k, L, *r)
+    addr = np.uint64(compiled.erfcx_address())
+    got = np.array([_numba.luebbers(addr, phi[i], pp[i], b0[i], n[i], k, L[i], r[0, i], r[1, i], r[2, i], r[3, i],
+                                    1e-6) for i in range(m)])
+    # a term near its boundary is a difference of nearly equal angles: the relative error is
+    # that of its eps (~1e-16 / |eps|) times the term's share of D
+    scale = np.maximum(np.maximum(np.abs(ref.d_s), np.abs(ref.d_h)), 1e-300)[:, None]  # L = 0 gives D = 0
+    err = np.abs(got - np.stack(ref, axis=1)) / scale
+    assert np.max(err) < 1e-9
+    assert np.median(err) < 1e-15
+
+
+@pytest.fixture(scope="module")
+def canyon_paths():
+    from wavepaths.bench.scenes import STREET_CANYON_TX, sionna_scene_xml, street_canyon_receivers
+
+    scene = load_scene(sionna_scene_xml("simple_street_canyon"))  # concrete, marble, metal, ...
+    rx = street_canyon_receivers(60)
+    paths = trace(scene, STREET_CANYON_TX, rx,
+                  TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2))
+    return scene, paths
+
+
+@pytest.mark.parametrize("reflection_model", ["slab", "half_space"])
+@pytest.mark.parametrize("model", ["utd", "gtd"])
+def test_compiled_chain_equals_the_numpy_chain(canyon_paths, reflection_model, model):
+    scene, paths = canyon_paths
+    kinds = paths.interactions[paths.interactions > 0]
+    assert {1, 2} <= set(kinds.tolist()) and len(paths) > 1000  # reflections and diffractions to check
+    cfg = dict(frequency_hz=F, model=model, reflection_model=reflection_model)
+    a_np = compute_fields(scene, paths, FieldConfig(**cfg, compiled=False)).a
+    a_nb = compute_fields(scene, paths, FieldConfig(**cfg, compiled=True)).a
+    assert np.all(_close(a_nb, a_np, 1e-11))
+    t_np = transfer_matrices(scene, paths, FieldConfig(**cfg, compiled=False))
+    t_nb = transfer_matrices(scene, paths, FieldConfig(**cfg, compiled=True))
+    assert np.allclose(t_nb, t_np, rtol=0, atol=1e-11 * np.abs(t_np).max())
+
+
+def test_compiled_false_never_enters_the_kernels(canyon_paths, monkeypatch):
+    from wavepaths.fields import _numba
+
+    scene, paths = canyon_paths
+
+    def boom(*args):
+        raise AssertionError("compiled kernel called")
+
+    monkeypatch.setattr(_numba, "reflect", boom)
+    monkeypatch.setattr(_numba, "diffract", boom)
+    compute_fields(scene, paths, FieldConfig(F, compiled=False))
+    with pytest.raises(AssertionError, match="compiled kernel called"):
+        compute_fields(scene, paths, FieldConfig(F, compiled=True))
+
+
+def test_an_unusable_material_raises_as_in_numpy(canyon_paths):
+    """A material outside its frequency range raises the reference's error, compiled or not,
+    and only when a path meets it."""
+    from wavepaths.errors import WavepathsError
+
+    scene, paths = canyon_paths
+    for flag in (False, True):
+        with pytest.raises(WavepathsError, match="frequency"):
+            compute_fields(scene, paths, FieldConfig(1e12, compiled=flag))
