@@ -142,3 +142,18 @@ def test_an_unusable_material_raises_as_in_numpy(canyon_paths):
     for flag in (False, True):
         with pytest.raises(WavepathsError, match="frequency"):
             compute_fields(scene, paths, FieldConfig(1e12, compiled=flag))
+
+
+def test_compiled_wedge_geometry_equals_the_numpy_one(canyon_paths):
+    from wavepaths.fields.chain import wedge_geometry
+
+    scene, paths = canyon_paths
+    for j in range(paths.max_depth):
+        rows = np.nonzero(paths.interactions[:, j] == 2)[0]
+        if not len(rows):
+            continue
+        ref = wedge_geometry(scene, paths, rows, j)
+        got = wedge_geometry(scene, paths, rows, j, compiled=True)
+        assert set(got) == set(ref)
+        for key in ref:
+            assert np.allclose(got[key], ref[key], rtol=0, atol=1e-12), key

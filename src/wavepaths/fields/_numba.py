@@ -225,3 +225,53 @@ def diffract(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, 
             E[r, p, 0] = ob * bo0 + op * po0
             E[r, p, 1] = ob * bo1 + op * po1
             E[r, p, 2] = ob * bo2 + op * po2
+
+
+@numba.njit(cache=True, nogil=True)
+def _angle(v0, v1, v2, x0, x1, x2, y0, y1, y2):
+    # wavepaths.fields.chain.wedge_geometry's angle(): mod(arctan2(v.y, v.x), 2 pi)
+    a = math.atan2(v0 * y0 + v1 * y1 + v2 * y2, v0 * x0 + v1 * x1 + v2 * x2)
+    return a % (2.0 * math.pi) if a < 0.0 else a
+
+
+@numba.njit(cache=True, nogil=True)
+def wedge_geometry(vertices, rows, j, dihedron, face_0, face_n, direction, face_direction):
+    """The angles and directions of :func:`wavepaths.fields.chain.wedge_geometry` (its
+    numpy reference), for the diffraction at interaction ``j`` of paths ``rows``.
+
+    Returns ``e``, ``s_in``, ``s_out`` (k, 3) and ``phi``, ``phi_prime``, ``beta_0``, ``n`` (k,).
+    """
+    k = len(rows)
+    e = np.empty((k, 3))
+    s_in = np.empty((k, 3))
+    s_out = np.empty((k, 3))
+    phi = np.empty(k)
+    phi_prime = np.empty(k)
+    beta_0 = np.empty(k)
+    n = np.empty(k)
+    for r in range(k):
+        i = rows[r]
+        d = dihedron[r]
+        e0, e1, e2 = direction[d, 0], direction[d, 1], direction[d, 2]
+        f0, fn = face_0[r], face_n[r]
+        x0, x1, x2 = face_direction[f0, 0], face_direction[f0, 1], face_direction[f0, 2]
+        y0, y1, y2 = e1 * x2 - e2 * x1, e2 * x0 - e0 * x2, e0 * x1 - e1 * x0
+        p0, p1, p2 = vertices[i, j + 1, 0], vertices[i, j + 1, 1], vertices[i, j + 1, 2]
+        a0, a1, a2 = vertices[i, j, 0] - p0, vertices[i, j, 1] - p1, vertices[i, j, 2] - p2  # prev - p
+        b0, b1, b2 = vertices[i, j + 2, 0] - p0, vertices[i, j + 2, 1] - p1, vertices[i, j + 2, 2] - p2  # nxt - p
+        la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        lb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        la = la if la > 0.0 else 1.0
+        lb = lb if lb > 0.0 else 1.0
+        si0, si1, si2 = -a0 / la, -a1 / la, -a2 / la  # unit(p - prev)
+        so0, so1, so2 = b0 / lb, b1 / lb, b2 / lb
+        w = _angle(face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2], x0, x1, x2, y0, y1, y2)
+        n[r] = (2.0 * math.pi if w < 1e-9 else w) / math.pi
+        phi_prime[r] = _angle(a0, a1, a2, x0, x1, x2, y0, y1, y2)
+        phi[r] = _angle(b0, b1, b2, x0, x1, x2, y0, y1, y2)
+        c0, c1, c2 = si1 * e2 - si2 * e1, si2 * e0 - si0 * e2, si0 * e1 - si1 * e0
+        beta_0[r] = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), si0 * e0 + si1 * e1 + si2 * e2)
+        e[r, 0], e[r, 1], e[r, 2] = e0, e1, e2
+        s_in[r, 0], s_in[r, 1], s_in[r, 2] = si0, si1, si2
+        s_out[r, 0], s_out[r, 1], s_out[r, 2] = so0, so1, so2
+    return e, s_in, s_out, phi, phi_prime, beta_0, n

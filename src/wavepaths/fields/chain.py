@@ -87,8 +87,11 @@ def _apply_reflection(scene: "Scene", cfg: FieldConfig, E: np.ndarray, k_in, k_o
     return (r_te[:, None] * es)[..., None] * e_s[:, None, :] + (r_tm[:, None] * ep)[..., None] * p_r[:, None, :]
 
 
-def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int):
+def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, compiled: bool = False):
     """UTD angles of the diffraction at interaction ``j`` of paths ``rows``.
+
+    ``compiled``: in :func:`wavepaths.fields._numba.wedge_geometry` (the same formulas; this
+    numpy code is its reference), if the compiled kernels are available.
 
     Returns
     -------
@@ -100,6 +103,14 @@ def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int):
     d = paths.primitive[rows, j]
     f0 = paths.wedge_faces[rows, 0]
     fn = paths.wedge_faces[rows, 1]
+    if compiled and _compiled.available():
+        from . import _numba
+
+        keys = ("e", "s_in", "s_out", "phi", "phi_prime", "beta_0", "n")
+        out = _numba.wedge_geometry(np.ascontiguousarray(paths.vertices, dtype=float), np.ascontiguousarray(rows, dtype=np.int64), j,
+                                    np.ascontiguousarray(d, dtype=np.int64), np.ascontiguousarray(f0, dtype=np.int64),
+                                    np.ascontiguousarray(fn, dtype=np.int64), dih.direction, dih.face_direction)
+        return dict(zip(keys, out), face_0=f0, face_n=fn)
     e = dih.direction[d]
     v = paths.vertices[rows]
     prev, p, nxt = v[:, j], v[:, j + 1], v[:, j + 2]
@@ -208,7 +219,7 @@ def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g
 
 
 def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, j, s_before, s_after) -> np.ndarray:
-    g = wedge_geometry(scene, paths, rows, j)
+    g = wedge_geometry(scene, paths, rows, j, compiled=_compiled.use_compiled(cfg))
     _on_boundary_sides(scene, paths, rows, j, g, np.minimum(s_before, s_after))
     if cfg.compat == "sionna":
         g = _sionna_face_order(g)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
@@ -24,6 +25,12 @@ def _compiled():
     except ImportError:
         return None
     return _numba
+
+
+THREAD_MIN_SEGMENTS = 1 << 15
+"""Segments per thread below which an occlusion query stays on the calling thread."""
+
+_COUNT_LOCK = threading.Lock()
 
 
 class EmbreeRayCaster:
@@ -78,6 +85,16 @@ class EmbreeRayCaster:
         self._rays = 0
         self.exact_fallbacks = 0  # segments Embree could not decide, decided in float64
 
+    def _threads(self, k: int) -> int:
+        """Threads for an occlusion query of ``k`` segments: numba's thread count (1 in the
+        coverage pool's workers, see :func:`wavepaths.search.kernels.set_threads`), one per
+        ``THREAD_MIN_SEGMENTS`` segments."""
+        if k < 2 * THREAD_MIN_SEGMENTS:
+            return 1
+        import numba
+
+        return max(1, min(int(numba.get_num_threads()), k // THREAD_MIN_SEGMENTS))
+
     @property
     def rays_cast(self) -> int:
         return self._rays
@@ -111,7 +128,17 @@ class EmbreeRayCaster:
         if k == 0:
             return blocked
         if self._kernels is not None:
-            return self._occluded_compiled(a, b)
+            n = self._threads(k)
+            if n <= 1:
+                return self._occluded_compiled(a, b)
+            # Embree and the compiled set-up release the GIL: contiguous slices on n threads
+            from concurrent.futures import ThreadPoolExecutor
+
+            cuts = np.linspace(0, k, n + 1).astype(int)
+            with ThreadPoolExecutor(max_workers=n) as pool:
+                parts = list(pool.map(lambda i: self._occluded_compiled(a[cuts[i]:cuts[i + 1]], b[cuts[i]:cuts[i + 1]]),
+                                      range(n)))
+            return np.concatenate(parts)
         a, b, _ = canonical(a - self._center, b - self._center)
         d = b - a
         uncertain = np.zeros(k, dtype=bool)
@@ -151,7 +178,8 @@ class EmbreeRayCaster:
                 prim[s : s + self._batch] = self._scene.run(
                     start[s : s + self._batch], unit[s : s + self._batch], dists=span[s : s + self._batch],
                     query="INTERSECT")
-            self._rays += len(rows)
+            with _COUNT_LOCK:
+                self._rays += len(rows)
             hit = prim >= 0
             seg, p = sel[rows[hit]], prim[hit].astype(np.int64)
             verdict = K.confirm_hits(A, B, seg, p, second, ex.normal, ex.offset, ex.tol, ex.inward,
@@ -167,7 +195,8 @@ class EmbreeRayCaster:
                 uncertain[s3[~ex.in_plane((A if second else B)[s3], p3)]] = True
         rest = np.nonzero(uncertain & ~blocked)[0]
         if len(rest):
-            self.exact_fallbacks += len(rest)
+            with _COUNT_LOCK:
+                self.exact_fallbacks += len(rest)
             blocked[rest] = ex.blocked(A[rest], B[rest])
         return blocked
 

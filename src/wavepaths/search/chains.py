@@ -29,7 +29,8 @@ def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact:
     counts as blocked: its geometry is undefined.
     """
     k, s, _ = vertices.shape
-    seg = np.linalg.norm(np.diff(vertices, axis=1), axis=2)
+    d = np.diff(vertices, axis=1)
+    seg = np.sqrt(np.einsum("ksj,ksj->ks", d, d))
     # only segments joining two interactions can be degenerate; a transmitter or receiver may
     # sit as close to a surface as it likes
     inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))

@@ -78,7 +78,8 @@ class Paths:
     @property
     def segment_lengths(self) -> np.ndarray:
         """(N, D + 1) float64: length of each segment [m] (0 past the path's end)."""
-        return np.linalg.norm(np.diff(self.vertices, axis=1), axis=2)
+        d = np.diff(self.vertices, axis=1)
+        return np.sqrt(np.einsum("nsj,nsj->ns", d, d))
 
     @property
     def lengths(self) -> np.ndarray:
@@ -249,7 +250,8 @@ def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: di
     txi = np.concatenate([b.tx_index for b in batches])
     rxi = np.concatenate([b.rx_index for b in batches])
     vertices = np.concatenate(verts)
-    lengths = np.linalg.norm(np.diff(vertices, axis=1), axis=2).sum(axis=1)
+    d = np.diff(vertices, axis=1)
+    lengths = np.sqrt(np.einsum("nsj,nsj->ns", d, d)).sum(axis=1)
     kinds = np.concatenate([pad(b.interactions, dmax, 0) for b in batches])
     prims = np.concatenate([pad(b.primitive, dmax, -1) for b in batches])
     # paths of equal length (symmetric scenes) by their interactions: the order does not
