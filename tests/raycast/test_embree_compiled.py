@@ -57,3 +57,56 @@ def test_without_numba_the_default_caster_runs_the_numpy_reference(monkeypatch, 
     caster = EmbreeRayCaster(scene)
     assert caster._kernels is None
     np.testing.assert_array_equal(caster.occluded(a, b), expect)
+
+
+@needs_numba
+def test_threaded_occlusion_decides_and_counts_like_one_thread(monkeypatch, rng):
+    """A query split over threads (numba's thread count) gives the same verdicts, in order,
+    and the same ray and fallback counts as on one thread."""
+    import numba
+
+    scene = load_scene("street_canyon")
+    a, b = _segments(scene, rng, 4000)
+    monkeypatch.setattr(embree, "THREAD_MIN_SEGMENTS", 1000)  # 12,050 segments: several slices
+    one, many = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
+    old = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert one._threads(len(a)) == 1
+        expect = one.occluded(a, b)
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        if numba.config.NUMBA_NUM_THREADS < 2:
+            pytest.skip("one CPU: nothing to split")
+        assert many._threads(len(a)) >= 2
+        np.testing.assert_array_equal(many.occluded(a, b), expect)
+    finally:
+        numba.set_num_threads(old)
+    assert many.rays_cast == one.rays_cast
+    assert many.exact_fallbacks == one.exact_fallbacks
+
+
+@needs_numba
+@pytest.mark.parametrize("moved", [False, True], ids=["origin", "at_1e6_m_rotated"])
+def test_compiled_first_triangle_hints_equal_the_numpy_ones(moved, rng, monkeypatch):
+    """The compiled ray set-up of ``first_triangle`` (clipping, float32 rays) builds the very
+    rays of the numpy one: the same triangles, on one thread and split over several."""
+    import numba
+
+    scene = load_scene("street_canyon")
+    if moved:
+        c, s = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
+        scene = transformed(scene, np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([1e6, -2e6, 30.0]))
+    a, b = _segments(scene, rng, 4000)
+    ref, got = EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True)
+    for x, y in ((a, b), (b, a)):
+        expect = ref.first_triangle(x, y)
+        assert 0.1 < (expect >= 0).mean() < 0.95
+        np.testing.assert_array_equal(got.first_triangle(x, y), expect)
+    monkeypatch.setattr(embree, "THREAD_MIN_SEGMENTS", 1000)
+    old = numba.get_num_threads()
+    try:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        np.testing.assert_array_equal(got.first_triangle(a, b), ref.first_triangle(a, b))
+    finally:
+        numba.set_num_threads(old)
+    assert got.rays_cast == ref.rays_cast

@@ -36,9 +36,37 @@ def canonical_recentred(a, b, center):
     return A, B, live
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _clip_ray(o, t, u, lo, hi):
+    """Unit direction ``o -> t`` into ``u``; returns ``(t0, t_end)``, the part of ``[0, |t - o|]``
+    inside the box ``[lo, hi]`` (slab clipping; empty when ``t_end <= t0``)."""
+    d0, d1, d2 = t[0] - o[0], t[1] - o[1], t[2] - o[2]
+    length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    den = length if length > 0 else 1.0
+    u[0], u[1], u[2] = d0 / den, d1 / den, d2 / den
+    inside = True
+    for c in range(3):
+        if not (lo[c] <= o[c] <= hi[c] and lo[c] <= t[c] <= hi[c]):
+            inside = False
+    if inside:
+        return 0.0, length
+    tmin = -np.inf
+    tmax = np.inf
+    for c in range(3):
+        if u[c] != 0:
+            inv = 1.0 / u[c]
+            t1 = (lo[c] - o[c]) * inv
+            t2 = (hi[c] - o[c]) * inv
+            tmin = max(tmin, min(t1, t2))
+            tmax = min(tmax, max(t1, t2))
+        elif not (lo[c] <= o[c] <= hi[c]):
+            return 0.0, 0.0
+    return max(tmin, 0.0), min(tmax, length)
+
+
 @numba.njit(cache=True, nogil=True)
 def half_rays(A, B, sel, second, lo, hi):
-    """The half-rays of the segments ``sel`` for Embree (EmbreeRayCaster.occluded/_nearest).
+    """The half-rays of the segments ``sel`` for Embree (EmbreeRayCaster.occluded).
 
     The first half-ray starts at 1/4 of ``A -> B`` towards ``B``, the second at 3/4 towards
     ``A``; each is clipped to the box ``[lo, hi]``. Returns ``(rows, start, unit, span)``:
@@ -64,36 +92,32 @@ def half_rays(A, B, sel, second, lo, hi):
             else:
                 o[c] = A[i, c] + 0.25 * d
                 t[c] = B[i, c]
-        d0, d1, d2 = t[0] - o[0], t[1] - o[1], t[2] - o[2]
-        length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        den = length if length > 0 else 1.0
-        u[0], u[1], u[2] = d0 / den, d1 / den, d2 / den
-        t0 = 0.0
-        t_end = length
-        inside = True
-        for c in range(3):
-            if not (lo[c] <= o[c] <= hi[c] and lo[c] <= t[c] <= hi[c]):
-                inside = False
-        if not inside:
-            # slab clipping of [0, length] against the box
-            tmin = -np.inf
-            tmax = np.inf
-            enters = True
+        t0, t_end = _clip_ray(o, t, u, lo, hi)
+        if t_end > t0:
+            rows[cnt] = r
             for c in range(3):
-                if u[c] != 0:
-                    inv = 1.0 / u[c]
-                    t1 = (lo[c] - o[c]) * inv
-                    t2 = (hi[c] - o[c]) * inv
-                    tmin = max(tmin, min(t1, t2))
-                    tmax = min(tmax, max(t1, t2))
-                elif not (lo[c] <= o[c] <= hi[c]):
-                    enters = False
-            if enters:
-                t0 = max(tmin, 0.0)
-                t_end = min(tmax, length)
-            else:
-                t0 = 0.0
-                t_end = 0.0
+                start[cnt, c] = o[c] + t0 * u[c]
+                unit[cnt, c] = u[c]
+            span[cnt] = t_end - t0
+            cnt += 1
+    return rows[:cnt], start[:cnt], unit[:cnt], span[:cnt]
+
+
+@numba.njit(cache=True, nogil=True)
+def segment_rays(origin, target, lo, hi):
+    """The rays ``origin -> target`` (recentred, float64) clipped to the box ``[lo, hi]``, for
+    EmbreeRayCaster._nearest (its numpy reference). Returns ``(rows, start, unit, span)`` as
+    :func:`half_rays`, the rows indexing ``origin``."""
+    n = origin.shape[0]
+    rows = np.empty(n, dtype=np.int64)
+    start = np.empty((n, 3), dtype=np.float32)
+    unit = np.empty((n, 3), dtype=np.float32)
+    span = np.empty(n, dtype=np.float32)
+    u = np.empty(3)
+    cnt = 0
+    for r in range(n):
+        o = origin[r]
+        t0, t_end = _clip_ray(o, target[r], u, lo, hi)
         if t_end > t0:
             rows[cnt] = r
             for c in range(3):

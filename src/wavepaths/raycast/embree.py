@@ -200,8 +200,37 @@ class EmbreeRayCaster:
             blocked[rest] = ex.blocked(A[rest], B[rest])
         return blocked
 
+    def _nearest_compiled(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """:meth:`_nearest` with the clipping compiled (:func:`wavepaths.raycast._numba.segment_rays`),
+        on numba's threads for large queries (see :meth:`occluded`)."""
+        k = len(origin)
+        n = self._threads(k)
+        origin = np.ascontiguousarray(origin, dtype=np.float64)
+        target = np.ascontiguousarray(target, dtype=np.float64)
+
+        def part(lo: int, hi: int) -> np.ndarray:
+            rows, start, unit, span = self._kernels.segment_rays(origin[lo:hi], target[lo:hi], self._lo, self._hi)
+            prim = np.full(hi - lo, -1, dtype=np.int64)
+            for s in range(0, len(rows), self._batch):
+                res = self._scene.run(start[s : s + self._batch], unit[s : s + self._batch],
+                                      dists=span[s : s + self._batch], query="INTERSECT")
+                prim[rows[s : s + self._batch]] = res
+            with _COUNT_LOCK:
+                self._rays += len(rows)
+            return prim
+
+        if n <= 1:
+            return part(0, k)
+        from concurrent.futures import ThreadPoolExecutor
+
+        cuts = np.linspace(0, k, n + 1).astype(int)
+        with ThreadPoolExecutor(max_workers=n) as pool:
+            return np.concatenate(list(pool.map(lambda i: part(cuts[i], cuts[i + 1]), range(n))))
+
     def _nearest(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
         """(k,) int: the triangle Embree hits first on the way from ``origin`` to ``target`` (recentred), -1 if none."""
+        if self._kernels is not None:
+            return self._nearest_compiled(origin, target)
         d = target - origin
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         unit = d / np.where(length > 0, length, 1.0)[:, None]
