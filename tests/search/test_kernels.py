@@ -274,3 +274,43 @@ def test_compiled_join_and_prefilter_keep_the_same_candidates_as_numpy(lit_regio
                 np.testing.assert_array_equal(x, y)
             assert s_nb == s_np
             assert (s_np["t_rejected_lit_region"] > 0) == (not lit_region)
+
+
+def test_group_sorted_equals_the_sorting_group(rng):
+    from wavepaths.search.context import _group, _group_sorted
+
+    for n in (0, 1, 7, 500):
+        keys = np.sort(rng.integers(0, max(n // 3, 1), n))
+        for got, ref in zip(_group_sorted(keys), _group(keys)):
+            np.testing.assert_array_equal(got, ref)
+            assert got.dtype == ref.dtype
+
+
+@needs_numba
+@pytest.mark.parametrize("order", [0, 1])
+def test_compiled_keller_cone_culling_keeps_the_same_sources_as_numpy(order, rng):
+    """Per (source, dihedron), for receiver spheres from a point to the whole street: the
+    same kept pairs as the numpy reference, some culled, and the transmitter side of the
+    kept rows equal to the one computed on them alone."""
+    from wavepaths.search.diffraction import _source_frames, keller_cone_keep
+
+    scene = load_scene("street_canyon")
+    ctx = build_tx_context(scene, TX, TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=1))
+    tside_all, frame = _source_frames(scene, ctx, order)
+    assert len(frame.A) > 10
+    culled = 0
+    for spread in (0.0, 0.5, 5.0, 40.0):
+        for _ in range(20):
+            targets = _receivers(rng, 1)[0] + rng.normal(scale=spread + 1e-12, size=(16, 3))
+            ref = keller_cone_keep(frame, targets, compiled=False)
+            got = keller_cone_keep(frame, targets, compiled=True)
+            assert (ref is None) == (got is None)
+            if ref is not None:
+                np.testing.assert_array_equal(got, ref)
+                culled += int((~ref).sum())
+                rows = np.nonzero(ref)[0]
+                alone = tile._transmitter_side(scene, ctx, ctx.levels[order], ctx.diffraction_sources[order].take(rows))
+                part = tside_all.take(rows)
+                for name in ("row", "dihedron", "sector", "phi", "t", "rho"):
+                    np.testing.assert_array_equal(getattr(part, name), getattr(alone, name), err_msg=name)
+    assert culled > 0

@@ -72,7 +72,8 @@ class DiffractionSources:
     def take(self, rows: np.ndarray) -> "DiffractionSources":
         """The pairs ``rows`` (in their sorted order), regrouped."""
         key = self.key[rows]
-        uk, start, count = _group(key)
+        ascending = len(rows) < 2 or bool(np.all(rows[1:] > rows[:-1]))
+        uk, start, count = _group_sorted(key) if ascending else _group(key)
         vis = None if self.visible is None else self.visible.take(rows)
         return DiffractionSources(self.chain[rows], self.dihedron[rows], key, uk, start, count, vis)
 
@@ -95,11 +96,23 @@ class TxContext:
     # of diffraction_sources[a], beams.edge_tree), or None without sources: the receiver side of
     # (a, b >= 1) queries it; empty without diffraction
     source_edges: list = field(default_factory=list)
+    # arrays derived from the diffraction sources, built on first use by the tiles under
+    # kernels.CACHE_LOCK (diffraction._source_frames: per order, the transmitter side and the
+    # Keller-cone frame of every source); receiver-independent, so shared by every tile
+    derived: dict = field(default_factory=dict)
 
 
 def _group(keys: np.ndarray):
     uk, start, count = np.unique(keys, return_index=True, return_counts=True)
     return uk, start.astype(np.int64), count.astype(np.int64)
+
+
+def _group_sorted(keys: np.ndarray):
+    """:func:`_group` of keys already sorted (no sort: the runs of equal keys)."""
+    if len(keys) == 0:
+        return keys.copy(), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    start = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]])).astype(np.int64)
+    return keys[start], start, np.diff(np.append(start, len(keys))).astype(np.int64)
 
 
 PAIR_BLOCK = 1 << 21  # (image, dihedron) pairs given the sector test at once

@@ -33,19 +33,21 @@ if TYPE_CHECKING:  # pragma: no cover
 DENSE_RECEIVER_SIDE_MAX_DIHEDRA = 4096
 
 
-def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.ndarray):
-    """The (source, dihedron) pairs whose Keller cones can reach a sphere around ``targets``.
+@dataclass(frozen=True)
+class KellerFrame:
+    """Per diffraction source (image S, dihedron from A to B, unit direction ``w``): the
+    edge's ends and the cosines of the incident cone at them, ``cos beta_X = w.(X - S)/|X - S|``
+    (:func:`keller_cone_keep`). Receiver-independent: built once per context and order."""
 
-    Along an edge from A (t = 0) to B (t = L), a receiver R is reached at some point iff
-    ``w.(R - A)/|R - A| >= cos beta_A`` and ``w.(R - B)/|R - B| <= cos beta_B`` with
-    ``cos beta_X = w.(X - S)/|X - S|`` (the diffracted cone's opening equals the incident
-    angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
-    with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
-    """
-    if len(src.chain) == 0 or len(targets) == 0:
-        return src
-    c = targets.mean(axis=0)
-    r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
+    A: np.ndarray  # (c, 3) [m]
+    B: np.ndarray  # (c, 3) [m]
+    w: np.ndarray  # (c, 3)
+    cos_a: np.ndarray  # (c,)
+    cos_b: np.ndarray  # (c,)
+
+
+def keller_frame(dihedra, src, sources: np.ndarray) -> KellerFrame:
+    """The :class:`KellerFrame` of the sources ``src`` at image points ``sources`` (c, 3)."""
     d = src.dihedron
     w = dihedra.direction[d]
     A = dihedra.origin[d]
@@ -55,8 +57,34 @@ def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.
         v = x_to - x_from
         return np.einsum("ij,ij->i", v, w) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
 
-    cos_a = cos_to(sources, A)
-    cos_b = cos_to(sources, B)
+    c = np.ascontiguousarray
+    return KellerFrame(c(A), c(B), c(w), cos_to(sources, A), cos_to(sources, B))
+
+
+def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = False) -> np.ndarray | None:
+    """(c,) bool: the (source, dihedron) pairs whose Keller cones can reach a sphere around
+    ``targets``; ``None`` when all can.
+
+    Along an edge from A (t = 0) to B (t = L), a receiver R is reached at some point iff
+    ``w.(R - A)/|R - A| >= cos beta_A`` and ``w.(R - B)/|R - B| <= cos beta_B`` with
+    ``cos beta_X = w.(X - S)/|X - S|`` (the diffracted cone's opening equals the incident
+    angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
+    with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
+    ``compiled``: the same expressions in :func:`wavepaths.search._numba.keller_cone_keep`
+    (this numpy code is its reference).
+    """
+    if len(frame.A) == 0 or len(targets) == 0:
+        return None
+    c = targets.mean(axis=0)
+    r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
+    slack = 1e-9
+    if compiled and kernels.available():
+        from . import _numba
+
+        keep = np.empty(len(frame.A), dtype=np.bool_)
+        n = _numba.keller_cone_keep(frame.A, frame.B, frame.w, frame.cos_a, frame.cos_b, c, r, slack, keep)
+        return None if n == len(keep) else keep
+    w = frame.w
 
     def angle_range(X):
         v = c - X
@@ -65,15 +93,29 @@ def _cull_sources_by_keller_cone(dihedra, src, sources: np.ndarray, targets: np.
         delta = np.where(dist > r, np.arcsin(np.clip(r / np.maximum(dist, 1e-300), 0, 1)), np.pi)
         return theta, delta
 
-    th_a, de_a = angle_range(A)
-    th_b, de_b = angle_range(B)
-    slack = 1e-9
-    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) >= cos_a - slack
-    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) <= cos_b + slack
+    th_a, de_a = angle_range(frame.A)
+    th_b, de_b = angle_range(frame.B)
+    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) >= frame.cos_a - slack
+    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) <= frame.cos_b + slack
     keep = reach_a & reach_b
-    if keep.all():
-        return src
-    return src.take(np.nonzero(keep)[0])
+    return None if keep.all() else keep
+
+
+def _source_frames(scene: "Scene", ctx: TxContext, a: int) -> tuple[_EndSide, KellerFrame]:
+    """The transmitter side (:func:`_transmitter_side`) and the :class:`KellerFrame` of all the
+    order-``a`` diffraction sources, built once per context (``ctx.derived``); a chunk's
+    culled sources take their rows."""
+    key = ("source_frames", a)
+    got = ctx.derived.get(key)
+    if got is None:
+        with kernels.CACHE_LOCK:
+            got = ctx.derived.get(key)
+            if got is None:
+                src, tx_lv = ctx.diffraction_sources[a], ctx.levels[a]
+                got = (_transmitter_side(scene, ctx, tx_lv, src),
+                       keller_frame(scene.dihedra, src, tx_lv.last[src.chain]))
+                ctx.derived[key] = got
+    return got
 
 
 def _join_ranges(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
@@ -251,18 +293,18 @@ def diffraction_tile(
     4. the reflection points on both sides by the image method (back-traces);
     5. occlusion of every leg, cast in one batch.
     """
-    dihedra = scene.dihedra
-    tx_lv = ctx.levels[a]
     rx_lv = rx_levels[b]
     tag = f"diffraction_{a}r_{b}r"
     out: list[PathBatch] = []
     if len(rx_lv) == 0 or len(ctx.diffraction_sources[a].chain) == 0:
         return out
     src_all = ctx.diffraction_sources[a]
+    tside_all, cone = _source_frames(scene, ctx, a)
+    compiled = ctx.options.compiled and kernels.available()
     m = int(ctx.sectors.angles.shape[1])
     # receiver images per chunk: the numpy receiver side holds about m + 4 (images x dihedra)
     # temporaries, the compiled one a single int32 array of the survivors' columns
-    per_pair = 1 if (ctx.options.compiled and kernels.available()) else m + 4
+    per_pair = 1 if compiled else m + 4
     step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
     # receiver images in chunks of consecutive rows: in Morton order (:func:`spatial_order`),
     # each chunk is compact in space, and the Keller-cone culling below keeps fewer dihedra
@@ -271,15 +313,17 @@ def diffraction_tile(
         e_rows = np.arange(s, min(len(rx_lv), s + step))
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
         # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
-        src = src_all
+        src, tside = src_all, tside_all
         if "keller_cone" not in ctx.options.disable_culling:
-            src = _cull_sources_by_keller_cone(dihedra, src_all, tx_lv.last[src_all.chain], rx_lv.last[e_rows])
+            keep = keller_cone_keep(cone, rx_lv.last[e_rows], compiled)
+            if keep is not None:
+                rows = np.nonzero(keep)[0]
+                src, tside = src_all.take(rows), tside_all.take(rows)
         stats[f"{tag}_source_pairs_culled_keller_cone"] += len(src_all.chain) - len(src.chain)
         diffr = np.unique(src.dihedron)
         if len(diffr) == 0:
             continue
         stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
-        tside = _transmitter_side(scene, ctx, tx_lv, src)
         window = None if "keller_window" in ctx.options.disable_culling else _keller_window(scene, tside)
         if (b >= 1 and edges is not None and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA
                 and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling):

@@ -47,6 +47,12 @@ class _EndSide:
     rho: np.ndarray
     visible: VisibilityWindows | None = None  # transmitter side: the part of each edge its incident leg may reach
 
+    def take(self, rows: np.ndarray) -> "_EndSide":
+        """The rows ``rows``."""
+        vis = None if self.visible is None else self.visible.take(rows)
+        return _EndSide(self.row[rows], self.dihedron[rows], self.sector[rows], self.phi[rows], self.t[rows],
+                        self.rho[rows], vis)
+
 
 def _keller_window(scene: "Scene", tside: _EndSide) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per dihedron, the window of receiver coordinates some transmitter-side source can reach on the edge.
