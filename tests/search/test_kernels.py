@@ -314,3 +314,22 @@ def test_compiled_keller_cone_culling_keeps_the_same_sources_as_numpy(order, rng
                 for name in ("row", "dihedron", "sector", "phi", "t", "rho"):
                     np.testing.assert_array_equal(getattr(part, name), getattr(alone, name), err_msg=name)
     assert culled > 0
+
+
+@needs_numba
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_compiled_backtrace_equals_numpy(order, rng):
+    """Receivers and random edge points back-traced through every chain of the transmitter's
+    tree: the same survivors, rejection counts and (to rounding) reflection points."""
+    from wavepaths.search.images import backtrace
+
+    scene = load_scene("street_canyon")
+    lv = build_image_levels(scene, TX, 3)[order]
+    targets = np.concatenate([_receivers(rng, 40), scene.vertices[rng.integers(0, len(scene.vertices), 20)]])
+    ti, ci = np.repeat(np.arange(len(targets)), len(lv)), np.tile(np.arange(len(lv)), len(targets))
+    ref = backtrace(scene, targets[ti], lv, ci, compiled=False)
+    got = backtrace(scene, targets[ti], lv, ci, compiled=True)
+    assert 0 < len(ref[0]) < len(ci) and ref[2]["segment"] > 0 and ref[2]["outside_polygon"] > 0
+    np.testing.assert_array_equal(got[0], ref[0])
+    np.testing.assert_allclose(got[1], ref[1], rtol=0, atol=1e-9)
+    assert got[2] == ref[2]

@@ -422,9 +422,9 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
         amp = _diffraction_amplitude_bound(ctx, phi, phi_prime, wedge / np.pi, te, de, tr, dr, t)
     P = dihedra.origin[d] + t[:, None] * dihedra.direction[d]
     # reflections after (receiver images) and before (transmitter images)
-    ok2, post, rej2 = backtrace(scene, P, rx_lv, e)
+    ok2, post, rej2 = backtrace(scene, P, rx_lv, e, compiled=ctx.options.compiled)
     e, d, sec, c, P = e[ok2], d[ok2], sec[ok2], c[ok2], P[ok2]
-    ok1, pre, rej1 = backtrace(scene, P, tx_lv, c)
+    ok1, pre, rej1 = backtrace(scene, P, tx_lv, c, compiled=ctx.options.compiled)
     e, d, sec, c, P, post = e[ok1], d[ok1], sec[ok1], c[ok1], P[ok1], post[ok1]
     stats[f"{tag}_rejected_segment"] += rej1["segment"] + rej2["segment"]
     stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]

@@ -410,7 +410,8 @@ def build_image_levels_all_pairs(
 
 
 def backtrace(
-    scene: "Scene", target: np.ndarray, level: ImageLevel, chain: np.ndarray, eps: float = 1e-12
+    scene: "Scene", target: np.ndarray, level: ImageLevel, chain: np.ndarray, eps: float = 1e-12,
+    compiled: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Reflection points of image chains that end at ``target`` (image method, backwards).
 
@@ -432,6 +433,9 @@ def backtrace(
         Row of ``level`` for each target.
     eps : float
         Margin on the segment parameter (0 + eps < t < 1 - eps).
+    compiled : bool
+        Run :func:`wavepaths.search._numba.backtrace` (the same tests candidate by candidate,
+        this code being its reference) when numba is installed.
 
     Returns
     -------
@@ -446,6 +450,19 @@ def backtrace(
 
     k = level.order
     m = len(chain)
+    from . import kernels
+
+    if compiled and k >= 1 and kernels.available():
+        from . import _numba
+
+        keep = np.empty(m, np.int64)
+        points = np.empty((m, k, 3))
+        rej = np.zeros(2, np.int64)
+        n = _numba.backtrace(np.ascontiguousarray(target, dtype=np.float64), level.images, level.polygons,
+                             np.ascontiguousarray(chain, dtype=np.int64), scene.polygon_normal, scene.polygon_offset,
+                             scene.polygon_tri_ptr, scene.polygon_tris, scene.triangles, scene.vertices,
+                             scene.triangle_dual, float(eps), 1e-9, keep, points, rej)
+        return keep[:n], points[:n], {"segment": int(rej[0]), "outside_polygon": int(rej[1])}
     keep = np.arange(m)
     found = []
     rejected = {"segment": 0, "outside_polygon": 0}

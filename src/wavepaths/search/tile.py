@@ -81,11 +81,11 @@ def reflection_tile(
             weak = unfolded > 10 ** (ctx.options.prune_db / 20) * direct
             if weak.any():
                 # count only those that would have been paths, so the stated bound uses the true number
-                okw, _, _ = backtrace(scene, rx[ri[weak]], lv, ci[weak])
+                okw, _, _ = backtrace(scene, rx[ri[weak]], lv, ci[weak], compiled=ctx.options.compiled)
                 stats["pruned_paths_upper_bound"] += len(okw)
                 stats[f"{tag}_pruned_candidates"] += int(weak.sum())
             ri, ci = ri[~weak], ci[~weak]
-        ok, pts, rej = backtrace(scene, rx[ri], lv, ci)
+        ok, pts, rej = backtrace(scene, rx[ri], lv, ci, compiled=ctx.options.compiled)
         stats[f"{tag}_rejected_segment"] += rej["segment"]
         stats[f"{tag}_rejected_outside_polygon"] += rej["outside_polygon"]
         ri, ci = ri[ok], ci[ok]
