@@ -128,6 +128,7 @@ def test_compiled_false_never_enters_the_kernels(canyon_paths, monkeypatch):
 
     monkeypatch.setattr(_numba, "reflect", boom)
     monkeypatch.setattr(_numba, "diffract", boom)
+    monkeypatch.setattr(_numba, "diffract_parallel", boom)
     compute_fields(scene, paths, FieldConfig(F, compiled=False))
     with pytest.raises(AssertionError, match="compiled kernel called"):
         compute_fields(scene, paths, FieldConfig(F, compiled=True))
@@ -157,3 +158,17 @@ def test_compiled_wedge_geometry_equals_the_numpy_one(canyon_paths):
         assert set(got) == set(ref)
         for key in ref:
             assert np.allclose(got[key], ref[key], rtol=0, atol=1e-12), key
+
+
+def test_parallel_diffraction_kernel_equals_the_serial_one(canyon_paths, monkeypatch):
+    import numba
+
+    scene, paths = canyon_paths
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one CPU: no threads")
+    monkeypatch.setattr(compiled, "PARALLEL_MIN_ROWS", 1 << 60)
+    assert not compiled.parallel(1 << 40)
+    serial = compute_fields(scene, paths, FieldConfig(F)).a
+    monkeypatch.setattr(compiled, "PARALLEL_MIN_ROWS", 1)
+    assert compiled.parallel(10)
+    np.testing.assert_array_equal(compute_fields(scene, paths, FieldConfig(F)).a, serial)

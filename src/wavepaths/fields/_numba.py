@@ -195,6 +195,33 @@ def reflect(E, k_in, k_out, normal, material, kinds, etas, thick, slab):
             E[r, p, 2] = es * s2 + ep * pr2
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
+                  kinds, etas, thick, slab):
+    b0 = beta_0[r]
+    sb = abs(math.sin(b0))
+    nr = n[r]
+    m0, mn = mat_0[r], mat_n[r]
+    r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime[r])))
+    rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi[r])))
+    d_s, d_h = luebbers(addr, phi[r], phi_prime[r], b0, nr, k, L[r], r0_s, r0_h, rn_s, rn_h, floor)
+    e0, e1, e2 = e[r, 0], e[r, 1], e[r, 2]
+    a0, a1, a2 = s_in[r, 0], s_in[r, 1], s_in[r, 2]
+    o0, o1, o2 = s_out[r, 0], s_out[r, 1], s_out[r, 2]
+    f0, f1, f2 = x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2]
+    pi0, pi1, pi2 = _perp_unit(a0, a1, a2, e0, e1, e2, f0, f1, f2)
+    bi0, bi1, bi2 = a1 * pi2 - a2 * pi1, a2 * pi0 - a0 * pi2, a0 * pi1 - a1 * pi0
+    po0, po1, po2 = _perp_unit(e0, e1, e2, o0, o1, o2, f0, f1, f2)
+    bo0, bo1, bo2 = o1 * po2 - o2 * po1, o2 * po0 - o0 * po2, o0 * po1 - o1 * po0
+    for p in range(E.shape[1]):
+        x0, x1, x2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
+        ob = -d_s * (x0 * bi0 + x1 * bi1 + x2 * bi2)
+        op = -d_h * (x0 * pi0 + x1 * pi1 + x2 * pi2)
+        E[r, p, 0] = ob * bo0 + op * po0
+        E[r, p, 1] = ob * bo1 + op * po1
+        E[r, p, 2] = ob * bo2 + op * po2
+
+
 @numba.njit(cache=True, nogil=True)
 def diffract(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
              kinds, etas, thick, slab):
@@ -203,28 +230,17 @@ def diffract(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, 
     :func:`wavepaths.em.utd.luebbers_face_coefficients`), in place on ``E`` (k, P, 3).
     """
     for r in range(E.shape[0]):
-        b0 = beta_0[r]
-        sb = abs(math.sin(b0))
-        nr = n[r]
-        m0, mn = mat_0[r], mat_n[r]
-        r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime[r])))
-        rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi[r])))
-        d_s, d_h = luebbers(addr, phi[r], phi_prime[r], b0, nr, k, L[r], r0_s, r0_h, rn_s, rn_h, floor)
-        e0, e1, e2 = e[r, 0], e[r, 1], e[r, 2]
-        a0, a1, a2 = s_in[r, 0], s_in[r, 1], s_in[r, 2]
-        o0, o1, o2 = s_out[r, 0], s_out[r, 1], s_out[r, 2]
-        f0, f1, f2 = x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2]
-        pi0, pi1, pi2 = _perp_unit(a0, a1, a2, e0, e1, e2, f0, f1, f2)
-        bi0, bi1, bi2 = a1 * pi2 - a2 * pi1, a2 * pi0 - a0 * pi2, a0 * pi1 - a1 * pi0
-        po0, po1, po2 = _perp_unit(e0, e1, e2, o0, o1, o2, f0, f1, f2)
-        bo0, bo1, bo2 = o1 * po2 - o2 * po1, o2 * po0 - o0 * po2, o0 * po1 - o1 * po0
-        for p in range(E.shape[1]):
-            x0, x1, x2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
-            ob = -d_s * (x0 * bi0 + x1 * bi1 + x2 * bi2)
-            op = -d_h * (x0 * pi0 + x1 * pi1 + x2 * pi2)
-            E[r, p, 0] = ob * bo0 + op * po0
-            E[r, p, 1] = ob * bo1 + op * po1
-            E[r, p, 2] = ob * bo2 + op * po2
+        _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
+                      kinds, etas, thick, slab)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def diffract_parallel(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
+                      kinds, etas, thick, slab):
+    """:func:`diffract` with the rows on numba's threads (each row is independent)."""
+    for r in numba.prange(E.shape[0]):
+        _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
+                      kinds, etas, thick, slab)
 
 
 @numba.njit(cache=True, nogil=True)

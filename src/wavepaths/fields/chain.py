@@ -267,7 +267,8 @@ def _diffract_compiled(scene: "Scene", cfg: FieldConfig, E, g: dict, L, mat0, ma
     c = np.ascontiguousarray
     out = c(E, dtype=np.complex128)
     tables = _compiled.material_tables(scene, cfg, np.concatenate([mat0, matn]))
-    _numba.diffract(np.uint64(_compiled.erfcx_address()), out, c(g["e"]), c(g["s_in"]), c(g["s_out"]),
+    kernel = _numba.diffract_parallel if _compiled.parallel(len(out)) else _numba.diffract
+    kernel(np.uint64(_compiled.erfcx_address()), out, c(g["e"]), c(g["s_in"]), c(g["s_out"]),
                     c(scene.dihedra.face_direction[g["face_0"]]), c(g["phi"], dtype=float),
                     c(g["phi_prime"], dtype=float), c(g["beta_0"], dtype=float), c(g["n"], dtype=float),
                     c(L, dtype=float), float(cfg.wavenumber), SIN_BETA_0_FLOOR, mat0, matn, *tables,

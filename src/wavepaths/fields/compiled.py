@@ -15,6 +15,7 @@ if it disagrees.
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
@@ -59,6 +60,23 @@ def use_compiled(cfg: "FieldConfig") -> bool:
     return cfg.compiled and available()
 
 
+PARALLEL_MIN_ROWS = 1 << 13
+"""Diffracted rows from which the diffraction kernel runs on numba's threads (about 8 ms of
+work on one thread)."""
+
+
+def parallel(rows: int) -> bool:
+    """Whether a kernel call over ``rows`` paths should use numba's threads: enough rows,
+    more than one thread (1 in the coverage pool's workers), and the main thread (numba's
+    default threading layer must not be entered from two threads at once, see
+    :func:`wavepaths.search.kernels.receiver_pairs`)."""
+    if rows < PARALLEL_MIN_ROWS or threading.current_thread() is not threading.main_thread():
+        return False
+    import numba
+
+    return int(numba.get_num_threads()) > 1
+
+
 def material_tables(scene: "Scene", cfg: "FieldConfig", used: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per material of ``scene.materials``: kind code (int64), complex relative permittivity
     at ``cfg.frequency_hz`` and thickness in wavelengths. Only the materials ``used`` (indices)
@@ -96,4 +114,12 @@ def warm_up() -> bool:
     paths = trace(scene, np.array([[-60.0, 0.0, 10.0]]), rx, TraceOptions(max_reflections=1, diffraction=True))
     for model in ("slab", "half_space"):
         compute_fields(scene, paths, FieldConfig(reflection_model=model))
+    # the threaded diffraction kernel, with the argument types _diffract_compiled passes
+    from . import _numba
+
+    z, v = np.zeros(1), np.array([[0.0, 0.0, 1.0]])
+    for slab in (True, False):
+        _numba.diffract_parallel(np.uint64(erfcx_address()), np.ones((1, 1, 3), np.complex128), v, v, v, v, z, z,
+                                 z + 1.0, z + 1.5, z + 1.0, 1.0, 1e-6, np.zeros(1, np.int64), np.zeros(1, np.int64),
+                                 np.ones(1, np.int64), np.ones(1, np.complex128), z, slab)
     return True

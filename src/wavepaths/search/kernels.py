@@ -16,12 +16,15 @@ margins and an early exit:
 * :func:`chains_meeting_edges`: (image chains x edge tree)
   (:func:`wavepaths.search.beams.chains_meeting_edges`).
 
-Four more compiled loops, called from their modules with the numpy reference beside them:
+Six more compiled loops, called from their modules with the numpy reference beside them:
 the image trees' exact tests (``_numba.admissible``, :mod:`wavepaths.search.images`), the
 receiver side's frame and sector lookup (``_numba.end_sides``,
 :mod:`wavepaths.search.end_sides`), the join of the two sides with the closed-form
-point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`) and the proof that
-a mirror is hidden from a source (``_numba.behind``, :mod:`wavepaths.search.mirror_visibility`).
+point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`), the Keller-cone
+culling of the sources per chunk of receivers (``_numba.keller_cone_keep``, same module),
+the back-traces of the image method (``_numba.backtrace``, :mod:`wavepaths.search.images`)
+and the proof that a mirror is hidden from a source (``_numba.behind``,
+:mod:`wavepaths.search.mirror_visibility`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
 ``TraceOptions(compiled=False)``, the numpy reference runs and finds the same paths.
