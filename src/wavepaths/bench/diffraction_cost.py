@@ -26,7 +26,6 @@ ratio of those per-path costs.
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 

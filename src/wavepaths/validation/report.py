@@ -25,7 +25,6 @@ import os
 import platform
 import sys
 import time
-from dataclasses import asdict
 
 import numpy as np
 
@@ -457,7 +456,7 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
         "th{background:#f0f0f0}td:first-child{text-align:left}tr.bad{background:#fdd}tr.ok td:last-child{color:#070}"
         "code{background:#f4f4f4;padding:1px 3px}img{max-width:100%}.small{font-size:12px;color:#555}",
         "</style></head><body>",
-        f"<h1>wavepaths validation against Sionna RT and exact solutions</h1>",
+        "<h1>wavepaths validation against Sionna RT and exact solutions</h1>",
         f"<p>Generated {e(summary['generated'])} by <code>wavepaths validate{' --quick' if summary['quick'] else ''}</code>. "
         f"Overall: <b>{'PASS' if summary['passed'] else 'FAIL'}</b>.</p>",
         "<h2>Versions and machine</h2><table>" + "".join(
