@@ -333,3 +333,31 @@ def test_compiled_backtrace_equals_numpy(order, rng):
     np.testing.assert_array_equal(got[0], ref[0])
     np.testing.assert_allclose(got[1], ref[1], rtol=0, atol=1e-9)
     assert got[2] == ref[2]
+
+
+@needs_numba
+@pytest.mark.parametrize("prune", [False, True])
+def test_compiled_diffraction_candidates_equal_numpy(prune, rng, monkeypatch):
+    """The compiled candidate stage (boundary flags, points on the edges, both back-traces,
+    vertices) against its numpy reference in an otherwise identical (compiled) search: the
+    same paths with the same vertices, and the same counts of every rejection, with and
+    without the pruning of weak candidates."""
+    import wavepaths.search.diffraction as diffraction
+
+    scene = load_scene("street_canyon")
+    rx = _receivers(rng, 30)
+    opts = TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=2)
+    if prune:
+        opts = opts.with_(prune_db=30.0, prune_frequency_hz=3.5e9)
+    fast = trace(scene, TX, rx, opts)
+    monkeypatch.setattr(diffraction, "_diffraction_candidates_compiled", diffraction._diffraction_candidates_numpy)
+    ref = trace(scene, TX, rx, opts)
+    assert path_keys(fast) == path_keys(ref)
+    np.testing.assert_allclose(fast.vertices, ref.vertices, rtol=0, atol=1e-9)
+    for k in ref.stats:
+        if k.startswith("diffraction_") and ("rejected_segment" in k or "outside_polygon" in k or "pruned" in k):
+            assert fast.stats[k] == ref.stats[k], k
+    assert fast.stats.get("pairs_on_boundaries", 0) == ref.stats.get("pairs_on_boundaries", 0)
+    assert sum(v for k, v in ref.stats.items() if k.endswith("rejected_outside_polygon")) > 0
+    if prune:
+        assert ref.stats["pruned_paths_upper_bound"] > 0

@@ -671,3 +671,86 @@ def backtrace(target, images, polygons, chain, normal, offset, ptr, polygon_tris
             keep[n] = i
             n += 1
     return n
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _trace_back(y0, y1, y2, images, polygons, c, normal, offset, ptr, polygon_tris, triangles, vertices, dual, eps,
+                eps_poly, out, base, step, i, rejected):
+    # one candidate of backtrace() below: writes reflection j's point at out[i, base + step * j];
+    # returns whether the chain is valid (a rejection is counted in rejected[0] or [1])
+    k = polygons.shape[1]
+    for j in range(k - 1, -1, -1):
+        q = polygons[c, j]
+        n0, n1, n2, d = normal[q, 0], normal[q, 1], normal[q, 2], offset[q]
+        b0, b1, b2 = images[c, j + 1, 0], images[c, j + 1, 1], images[c, j + 1, 2]
+        da = y0 * n0 + y1 * n1 + y2 * n2 - d
+        db = b0 * n0 + b1 * n1 + b2 * n2 - d
+        den = da - db
+        t = da / den if abs(den) > 0 else -1.0
+        if not (t > eps and t < 1 - eps):
+            rejected[0] += 1
+            return False
+        x0, x1, x2 = y0 + t * (b0 - y0), y1 + t * (b1 - y1), y2 + t * (b2 - y2)
+        inside = False
+        for s in range(ptr[q], ptr[q + 1]):
+            tr = polygon_tris[s]
+            o = triangles[tr, 0]
+            r0, r1, r2 = x0 - vertices[o, 0], x1 - vertices[o, 1], x2 - vertices[o, 2]
+            v = dual[tr, 0, 0] * r0 + dual[tr, 0, 1] * r1 + dual[tr, 0, 2] * r2
+            w = dual[tr, 1, 0] * r0 + dual[tr, 1, 1] * r1 + dual[tr, 1, 2] * r2
+            if v >= -eps_poly and w >= -eps_poly and v + w <= 1 + eps_poly:
+                inside = True
+                break
+        if not inside:
+            rejected[1] += 1
+            return False
+        p = base + step * j
+        out[i, p, 0], out[i, p, 1], out[i, p, 2] = x0, x1, x2
+        y0, y1, y2 = x0, x1, x2
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def diffraction_vertices(rows, src_rows, t, r_row, r_dih, r_sec, r_phi, r_t, r_rho, s_row, s_phi, s_t, s_rho, width,
+                         origin, direction, near_tol, rx_images, rx_polygons, rx_source, rx, tx_images, tx_polygons,
+                         normal, offset, ptr, polygon_tris, triangles, vertices, dual, eps, eps_poly, near, keep,
+                         verts, rejected):
+    # diffraction._diffraction_candidates' steps up to the vertices (numpy reference): per
+    # candidate, whether it lies within the float32 uncertainty of a shadow or reflection
+    # boundary (near, for every input row), the point P on the edge, the back-trace through
+    # the receiver images (reflections after P), then through the transmitter images
+    # (before P), and the path's vertices [tx, pre..., P, post reversed..., rx] written at
+    # verts[n]; keep[:n] the surviving input rows (n returned), rejected as backtrace()
+    a = tx_polygons.shape[1]
+    b = rx_polygons.shape[1]
+    n = 0
+    for i in range(rows.shape[0]):
+        ri, si, ti = rows[i], src_rows[i], t[i]
+        dd = r_dih[ri]
+        ph, pp = r_phi[ri], s_phi[si]
+        wedge = width[dd, r_sec[ri]]
+        leg = min(math.hypot(s_t[si] - ti, s_rho[si]), math.hypot(r_t[ri] - ti, r_rho[ri]))
+        offs = min(abs(abs(ph - pp) - np.pi), abs(ph + pp - np.pi))
+        offs = min(offs, abs(ph + pp - (2 * wedge - np.pi)))
+        near[i] = offs * leg < near_tol
+        p0 = origin[dd, 0] + ti * direction[dd, 0]
+        p1 = origin[dd, 1] + ti * direction[dd, 1]
+        p2 = origin[dd, 2] + ti * direction[dd, 2]
+        e = r_row[ri]
+        # reflections after P, the receiver chain's order: point j of the chain goes to a + 1 + b - j
+        if not _trace_back(p0, p1, p2, rx_images, rx_polygons, e, normal, offset, ptr, polygon_tris, triangles,
+                           vertices, dual, eps, eps_poly, verts, a + 1 + b, -1, n, rejected):
+            continue
+        if not _trace_back(p0, p1, p2, tx_images, tx_polygons, s_row[si], normal, offset, ptr, polygon_tris,
+                           triangles, vertices, dual, eps, eps_poly, verts, 1, 1, n, rejected):
+            continue
+        c = s_row[si]
+        for x in range(3):
+            verts[n, 0, x] = tx_images[c, 0, x]
+        verts[n, a + 1, 0], verts[n, a + 1, 1], verts[n, a + 1, 2] = p0, p1, p2
+        r = rx_source[e]
+        for x in range(3):
+            verts[n, a + b + 2, x] = rx[r, x]
+        keep[n] = i
+        n += 1
+    return n

@@ -399,8 +399,16 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     """Steps 4 and 5 of :func:`diffraction_tile` on the candidates that passed
     :func:`_joined_candidates` (receiver side ``rside[rows]``, transmitter side
     ``tside[src_rows]``, diffraction points at ``t`` [m along the edge])."""
-    dihedra = scene.dihedra
+    fn = _diffraction_candidates_compiled if ctx.options.compiled and kernels.available() else _diffraction_candidates_numpy
+    return fn(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside, rows, tside, src_rows, t, pending)
+
+
+def _diffraction_candidates_numpy(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
+                                  rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray, t: np.ndarray,
+                                  pending: list | None = None) -> list[PathBatch]:
+    """:func:`_diffraction_candidates` in numpy (the reference of the compiled one)."""
     tx_lv = ctx.levels[a]
+    dihedra = scene.dihedra
     d = rside.dihedron[rows]
     te, de = tside.t[src_rows], tside.rho[src_rows]
     tr, dr = rside.t[rows], rside.rho[rows]
@@ -447,6 +455,58 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     post_polys = rx_lv.polygons[e][:, ::-1]
     rx_pos = rx[rx_lv.source[e]]
     verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
+    pend = PendingDiffraction(a, b, tx_lv.source[c], rx_lv.source[e], amp, (d, c, f0, fn, verts, post_polys))
+    if pending is not None:
+        pending.append(pend)
+        return []
+    return [finish_diffraction(scene, ctx, pend, rx_offset, stats)]
+
+
+def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside: _EndSide,
+                                     rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray, t: np.ndarray,
+                                     pending: list | None = None) -> list[PathBatch]:
+    """:func:`_diffraction_candidates` with the boundary flags, the points on the edges, both
+    back-traces and the vertices in :func:`wavepaths.search._numba.diffraction_vertices`
+    (the same expressions, candidate by candidate)."""
+    from . import _numba
+
+    tx_lv = ctx.levels[a]
+    k = len(rows)
+    c_ = np.ascontiguousarray
+    near = np.empty(k, np.bool_)
+    keep = np.empty(k, np.int64)
+    verts = np.empty((k, a + b + 3, 3))
+    rej = np.zeros(2, np.int64)
+    n = _numba.diffraction_vertices(
+        c_(rows, dtype=np.int64), c_(src_rows, dtype=np.int64), c_(t, dtype=np.float64), rside.row, rside.dihedron,
+        rside.sector, rside.phi, rside.t, rside.rho, tside.row, tside.phi, tside.t, tside.rho, ctx.sectors.width,
+        scene.dihedra.origin, scene.dihedra.direction, 4 * scene.length_tolerance(scene.tolerances.ray_offset),
+        rx_lv.images, rx_lv.polygons, rx_lv.source, c_(rx, dtype=np.float64), tx_lv.images, tx_lv.polygons,
+        scene.polygon_normal, scene.polygon_offset, scene.polygon_tri_ptr, scene.polygon_tris, scene.triangles,
+        scene.vertices, scene.triangle_dual, 1e-12, 1e-9, near, keep, verts, rej)
+    if near.any():
+        grazing[tx_lv.source[tside.row[src_rows[near]]], rx_lv.source[rside.row[rows[near]]]] = True
+        stats["pairs_on_boundaries"] += int(near.sum())
+    stats[f"{tag}_rejected_segment"] += int(rej[0])
+    stats[f"{tag}_rejected_outside_polygon"] += int(rej[1])
+    keep, verts = keep[:n], verts[:n]
+    rr, ss = rows[keep], src_rows[keep]
+    e, d, sec, c = rside.row[rr], rside.dihedron[rr], rside.sector[rr], tside.row[ss]
+    amp = None
+    if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
+        wedge = ctx.sectors.width[d, sec]
+        amp = _diffraction_amplitude_bound(ctx, rside.phi[rr], tside.phi[ss], wedge / np.pi, tside.t[ss], tside.rho[ss],
+                                           rside.t[rr], rside.rho[rr], t[keep])
+    if amp is not None and ctx.options.prune_db is not None:
+        direct = np.linalg.norm(rx[rx_lv.source[e]] - ctx.tx[tx_lv.source[c]], axis=1)
+        weak = amp * direct < 10 ** (-ctx.options.prune_db / 20)
+        stats["pruned_paths_upper_bound"] += int(weak.sum())
+        stats[f"{tag}_pruned_candidates"] += int(weak.sum())
+        strong = ~weak
+        e, d, sec, c, verts, amp = e[strong], d[strong], sec[strong], c[strong], verts[strong], amp[strong]
+    f0 = ctx.sectors.face[d, sec]
+    fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
+    post_polys = rx_lv.polygons[e][:, ::-1]
     pend = PendingDiffraction(a, b, tx_lv.source[c], rx_lv.source[e], amp, (d, c, f0, fn, verts, post_polys))
     if pending is not None:
         pending.append(pend)
