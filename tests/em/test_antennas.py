@@ -300,3 +300,27 @@ def test_h_to_h_line_of_sight_has_opposite_sign_to_v_to_v() -> None:
     hh = _los_coupling(Antenna("dipole", "H"), Antenna("dipole", "H"), d)[:, 0, 0]
     np.testing.assert_allclose(vv, 1.5, rtol=1e-14)
     np.testing.assert_allclose(hh, -1.5, rtol=1e-14)
+
+
+@pytest.mark.parametrize("pattern", ["iso", "dipole", "hw_dipole", "tr38901"])
+@pytest.mark.parametrize("polarization", ["V", "H", "VH", "cross"])
+@pytest.mark.parametrize("model", ["tr38901_1", "tr38901_2"])
+def test_field_vectors_are_the_field_components_on_the_global_basis(pattern, polarization, model) -> None:
+    """antenna_field_vectors = C_theta theta_hat + C_phi phi_hat of antenna_field, for
+    oriented antennas, random directions and the poles of both frames; transverse."""
+    from wavepaths.em.antennas import antenna_field_vectors
+    from wavepaths.em.polarization import spherical_unit_vectors
+
+    rng = np.random.default_rng(7)
+    d = rng.normal(size=(500, 3))
+    d = np.concatenate([d, [[0, 0, 1], [0, 0, -1], [1e-12, 0, 1], [1, 0, 0]]])
+    for orientation in [(0.0, 0.0, 0.0), (0.3, -0.7, 1.1), (0.0, np.pi / 2, 0.0)]:
+        ant = Antenna(pattern, polarization, orientation=orientation, polarization_model=model)
+        c = antenna_field(ant, d)
+        b = spherical_unit_vectors(d)
+        ref = c[..., 0:1] * b.theta_hat[:, None, :] + c[..., 1:2] * b.phi_hat[:, None, :]
+        got = antenna_field_vectors(ant, d)
+        assert got.shape == ref.shape
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+        u = d / np.linalg.norm(d, axis=1, keepdims=True)
+        assert np.abs(np.einsum("npj,nj->np", got, u)).max() < 1e-12

@@ -314,6 +314,57 @@ def antenna_field(
     return _antenna_field_kernel(antenna, d, _check_pole_tolerance(pole_tolerance))
 
 
+def antenna_field_vectors(
+    antenna: Antenna, directions: ArrayLike, *, pole_tolerance: float = 1e-9
+) -> ComplexArray:
+    """Field pattern of each port as a global 3-vector, ``C_theta theta_hat + C_phi phi_hat``.
+
+    The vector :func:`antenna_field`'s components describe, found without the global
+    spherical basis: ``R (C'_theta theta_hat' + C'_phi phi_hat')`` of the local direction
+    ``d' = R^T d`` (TR 38.901 §7.1.3; the projection on the global ``theta_hat``,
+    ``phi_hat`` and back is the identity on vectors transverse to ``d``). The field chain
+    (:mod:`wavepaths.fields.chain`) starts and ends with it.
+
+    Parameters
+    ----------
+    antenna : Antenna
+    directions : (..., 3) array_like of float
+        As :func:`antenna_field`.
+    pole_tolerance : float
+        As :func:`antenna_field`.
+
+    Returns
+    -------
+    (..., num_ports, 3) complex128
+        Transverse to the direction; ``|.|^2`` is the port's linear gain.
+    """
+    if not isinstance(antenna, Antenna):
+        raise WavepathsError(f"`antenna` must be an Antenna, got {type(antenna).__name__}")
+    d = as_unit_directions(directions)
+    tol = _check_pole_tolerance(pole_tolerance)
+    r = rotation_matrix(antenna.orientation)
+    x, y, z = _flat_components(d)
+    xl = r[0, 0] * x + r[1, 0] * y + r[2, 0] * z
+    yl = r[0, 1] * x + r[1, 1] * y + r[2, 1] * z
+    zl = r[0, 2] * x + r[1, 2] * y + r[2, 2] * z
+    n = np.sqrt(xl * xl + yl * yl + zl * zl)
+    xl, yl, zl = xl / n, yl / n, zl / n
+    th_l, ph_l = _spherical_basis(xl, yl, zl, tol)
+    if antenna.pattern == "tr38901":
+        theta_l, phi_l = _theta_phi(xl, yl, zl, tol)
+    else:
+        theta_l = phi_l = xl  # unused by the other patterns
+    amp = _vertical_amplitude(antenna.pattern, zl, np.sqrt(xl * xl + yl * yl), theta_l, phi_l)
+    out = np.zeros((x.size, antenna.num_ports, 3), dtype=np.complex128)
+    for port, zeta in enumerate(antenna.slant_angles):
+        a, b = _slant_components(antenna.polarization_model, zeta, th_l, ph_l, tol)
+        ca, cb = a * amp, b * amp
+        local = [ca * th_l[k] + cb * ph_l[k] for k in range(3)]  # the field in the local frame
+        for k in range(3):
+            out[:, port, k] = r[k, 0] * local[0] + r[k, 1] * local[1] + r[k, 2] * local[2]
+    return out.reshape(d.shape[:-1] + (antenna.num_ports, 3))
+
+
 def antenna_gain(
     antenna: Antenna, directions: ArrayLike, *, pole_tolerance: float = 1e-9
 ) -> FloatArray:

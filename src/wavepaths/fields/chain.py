@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..em.antennas import antenna_field
+from ..em.antennas import antenna_field_vectors
 from ..em.fresnel import reflection_coefficients
 from ..em.polarization import spherical_unit_vectors
 from ..em.sionna_compat import sionna_face_coefficients
@@ -289,9 +289,7 @@ def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[
     seg = paths.segment_lengths  # (N, D + 1)
     dirs = np.diff(paths.vertices, axis=1)
     dirs = dirs / np.where(seg > 0, seg, 1.0)[..., None]
-    c_tx = antenna_field(cfg.tx_antenna, paths.departure_directions)  # (N, Pt, 2)
-    basis = spherical_unit_vectors(paths.departure_directions)
-    E = c_tx[..., 0:1] * basis.theta_hat[:, None, :] + c_tx[..., 1:2] * basis.phi_hat[:, None, :]
+    E = antenna_field_vectors(cfg.tx_antenna, paths.departure_directions)  # (N, Pt, 3)
     total = seg.sum(axis=1)
     spreading = 1.0 / total
     before = np.cumsum(seg, axis=1)  # length up to the end of segment i
@@ -315,10 +313,7 @@ def path_coefficients(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndar
     ``a = (lambda / 4 pi) * spreading * C_rx^H E``; no ``exp(-j 2 pi f tau)`` phase.
     """
     E, spreading = path_field_vectors(scene, paths, cfg)
-    toward = -paths.arrival_directions
-    c_rx = antenna_field(cfg.rx_antenna, toward)  # (N, Pr, 2)
-    basis = spherical_unit_vectors(toward)
-    C = c_rx[..., 0:1] * basis.theta_hat[:, None, :] + c_rx[..., 1:2] * basis.phi_hat[:, None, :]  # (N, Pr, 3)
+    C = antenna_field_vectors(cfg.rx_antenna, -paths.arrival_directions)  # (N, Pr, 3)
     v = np.einsum("nrj,ntj->nrt", np.conj(C), E)
     return (cfg.wavelength / (4 * np.pi)) * spreading[:, None, None] * v
 
