@@ -60,8 +60,8 @@ def use_compiled(cfg: "FieldConfig") -> bool:
     return cfg.compiled and available()
 
 
-PARALLEL_MIN_ROWS = 1 << 13
-"""Diffracted rows from which the diffraction kernel runs on numba's threads (about 8 ms of
+PARALLEL_MIN_ROWS = 1 << 11
+"""Diffracted rows from which the diffraction kernel runs on numba's threads (about 2 ms of
 work on one thread)."""
 
 
