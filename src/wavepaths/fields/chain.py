@@ -107,9 +107,9 @@ def wedge_geometry(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, compi
         from . import _numba
 
         keys = ("e", "s_in", "s_out", "phi", "phi_prime", "beta_0", "n")
-        out = _numba.wedge_geometry(np.ascontiguousarray(paths.vertices, dtype=float), np.ascontiguousarray(rows, dtype=np.int64), j,
-                                    np.ascontiguousarray(d, dtype=np.int64), np.ascontiguousarray(f0, dtype=np.int64),
-                                    np.ascontiguousarray(fn, dtype=np.int64), dih.direction, dih.face_direction)
+        c = np.ascontiguousarray
+        out = _numba.wedge_geometry(c(paths.vertices, dtype=float), c(rows, dtype=np.int64), j, c(d, dtype=np.int64),
+                                    c(f0, dtype=np.int64), c(fn, dtype=np.int64), dih.direction, dih.face_direction)
         return dict(zip(keys, out), face_0=f0, face_n=fn)
     e = dih.direction[d]
     v = paths.vertices[rows]
@@ -269,10 +269,9 @@ def _diffract_compiled(scene: "Scene", cfg: FieldConfig, E, g: dict, L, mat0, ma
     tables = _compiled.material_tables(scene, cfg, np.concatenate([mat0, matn]))
     kernel = _numba.diffract_parallel if _compiled.parallel(len(out)) else _numba.diffract
     kernel(np.uint64(_compiled.erfcx_address()), out, c(g["e"]), c(g["s_in"]), c(g["s_out"]),
-                    c(scene.dihedra.face_direction[g["face_0"]]), c(g["phi"], dtype=float),
-                    c(g["phi_prime"], dtype=float), c(g["beta_0"], dtype=float), c(g["n"], dtype=float),
-                    c(L, dtype=float), float(cfg.wavenumber), SIN_BETA_0_FLOOR, mat0, matn, *tables,
-                    cfg.reflection_model == "slab")
+           c(scene.dihedra.face_direction[g["face_0"]]), c(g["phi"], dtype=float), c(g["phi_prime"], dtype=float),
+           c(g["beta_0"], dtype=float), c(g["n"], dtype=float), c(L, dtype=float), float(cfg.wavenumber),
+           SIN_BETA_0_FLOOR, mat0, matn, *tables, cfg.reflection_model == "slab")
     return out
 
 

@@ -88,8 +88,9 @@ class EmbreeRayCaster:
     def _threads(self, k: int) -> int:
         """Threads for an occlusion query of ``k`` segments: numba's thread count (1 in the
         coverage pool's workers, see :func:`wavepaths.search.kernels.set_threads`), one per
-        ``THREAD_MIN_SEGMENTS`` segments."""
-        if k < 2 * THREAD_MIN_SEGMENTS:
+        ``THREAD_MIN_SEGMENTS`` segments; 1 off the main thread (tiles traced on several
+        threads already share the cores)."""
+        if k < 2 * THREAD_MIN_SEGMENTS or threading.current_thread() is not threading.main_thread():
             return 1
         import numba
 
@@ -136,8 +137,8 @@ class EmbreeRayCaster:
 
             cuts = np.linspace(0, k, n + 1).astype(int)
             with ThreadPoolExecutor(max_workers=n) as pool:
-                parts = list(pool.map(lambda i: self._occluded_compiled(a[cuts[i]:cuts[i + 1]], b[cuts[i]:cuts[i + 1]]),
-                                      range(n)))
+                parts = list(pool.map(lambda i: self._occluded_compiled(a[cuts[i] : cuts[i + 1]],
+                                                                        b[cuts[i] : cuts[i + 1]]), range(n)))
             return np.concatenate(parts)
         a, b, _ = canonical(a - self._center, b - self._center)
         d = b - a

@@ -399,7 +399,8 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
     """Steps 4 and 5 of :func:`diffraction_tile` on the candidates that passed
     :func:`_joined_candidates` (receiver side ``rside[rows]``, transmitter side
     ``tside[src_rows]``, diffraction points at ``t`` [m along the edge])."""
-    fn = _diffraction_candidates_compiled if ctx.options.compiled and kernels.available() else _diffraction_candidates_numpy
+    compiled = ctx.options.compiled and kernels.available()
+    fn = _diffraction_candidates_compiled if compiled else _diffraction_candidates_numpy
     return fn(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside, rows, tside, src_rows, t, pending)
 
 
