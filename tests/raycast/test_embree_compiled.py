@@ -26,15 +26,21 @@ def _segments(scene, rng, n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([a, v[:, 0], on_face, a[:50]]), np.concatenate([b, v[:, 1], b, a[:50]])  # + zero length
 
 
+def _street_canyon(moved: bool):
+    """The built-in street canyon, or the same moved to 1e6 m and rotated by 37 degrees."""
+    scene = load_scene("street_canyon")
+    if moved:
+        c, s = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
+        scene = transformed(scene, np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([1e6, -2e6, 30.0]))
+    return scene
+
+
 @needs_numba
 @pytest.mark.parametrize("moved", [False, True], ids=["origin", "at_1e6_m_rotated"])
 def test_compiled_and_numpy_embree_casters_decide_every_segment_alike(moved, rng):
     """Bit-for-bit the same verdicts, both directions, on 12,000 segments of the street
     canyon, also with the scene moved to 1e6 m and rotated (float32 recentring)."""
-    scene = load_scene("street_canyon")
-    if moved:
-        c, s = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
-        scene = transformed(scene, np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([1e6, -2e6, 30.0]))
+    scene = _street_canyon(moved)
     a, b = _segments(scene, rng, 4000)
     ref, got = EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True)
     for x, y in ((a, b), (b, a)):
@@ -92,10 +98,7 @@ def test_compiled_first_triangle_hints_equal_the_numpy_ones(moved, rng, monkeypa
     rays of the numpy one: the same triangles, on one thread and split over several."""
     import numba
 
-    scene = load_scene("street_canyon")
-    if moved:
-        c, s = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
-        scene = transformed(scene, np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([1e6, -2e6, 30.0]))
+    scene = _street_canyon(moved)
     a, b = _segments(scene, rng, 4000)
     ref, got = EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True)
     for x, y in ((a, b), (b, a)):

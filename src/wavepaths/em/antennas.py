@@ -237,8 +237,10 @@ def _slant_components(
     return a / safe, b / safe
 
 
-def _antenna_field_kernel(antenna: Antenna, d: FloatArray, tol: float) -> ComplexArray:
-    """Kernel of :func:`antenna_field` for unit global directions ``d`` (..., 3).
+def _local_pattern(antenna: Antenna, d: FloatArray, tol: float):
+    """The local side of :func:`antenna_field` for unit global directions ``d`` (..., 3):
+    ``R``, the flat global components ``x, y, z``, the local spherical basis ``th_l, ph_l``
+    of ``d' = R^T d`` and the vertical amplitude ``C~`` there.
 
     Works on separate 1-D component arrays: numpy is several times faster on them
     than on a trailing axis of length 3.
@@ -251,9 +253,18 @@ def _antenna_field_kernel(antenna: Antenna, d: FloatArray, tol: float) -> Comple
     zl = r[0, 2] * x + r[1, 2] * y + r[2, 2] * z
     n = np.sqrt(xl * xl + yl * yl + zl * zl)
     xl, yl, zl = xl / n, yl / n, zl / n
-    theta_l, phi_l = _theta_phi(xl, yl, zl, tol)
     th_l, ph_l = _spherical_basis(xl, yl, zl, tol)
+    if antenna.pattern == "tr38901":
+        theta_l, phi_l = _theta_phi(xl, yl, zl, tol)
+    else:
+        theta_l = phi_l = xl  # the other patterns depend on z and rho only
     amp = _vertical_amplitude(antenna.pattern, zl, np.sqrt(xl * xl + yl * yl), theta_l, phi_l)
+    return r, (x, y, z), th_l, ph_l, amp
+
+
+def _antenna_field_kernel(antenna: Antenna, d: FloatArray, tol: float) -> ComplexArray:
+    """Kernel of :func:`antenna_field` for unit global directions ``d`` (..., 3)."""
+    r, (x, y, z), th_l, ph_l, amp = _local_pattern(antenna, d, tol)
     th_g, ph_g = _spherical_basis(x, y, z, tol)
     # The global spherical vectors expressed in the local frame, R^T th_g and R^T ph_g,
     # dotted with the local ones give the 2x2 local-to-global field matrix
@@ -342,19 +353,7 @@ def antenna_field_vectors(
         raise WavepathsError(f"`antenna` must be an Antenna, got {type(antenna).__name__}")
     d = as_unit_directions(directions)
     tol = _check_pole_tolerance(pole_tolerance)
-    r = rotation_matrix(antenna.orientation)
-    x, y, z = _flat_components(d)
-    xl = r[0, 0] * x + r[1, 0] * y + r[2, 0] * z
-    yl = r[0, 1] * x + r[1, 1] * y + r[2, 1] * z
-    zl = r[0, 2] * x + r[1, 2] * y + r[2, 2] * z
-    n = np.sqrt(xl * xl + yl * yl + zl * zl)
-    xl, yl, zl = xl / n, yl / n, zl / n
-    th_l, ph_l = _spherical_basis(xl, yl, zl, tol)
-    if antenna.pattern == "tr38901":
-        theta_l, phi_l = _theta_phi(xl, yl, zl, tol)
-    else:
-        theta_l = phi_l = xl  # unused by the other patterns
-    amp = _vertical_amplitude(antenna.pattern, zl, np.sqrt(xl * xl + yl * yl), theta_l, phi_l)
+    r, (x, _, _), th_l, ph_l, amp = _local_pattern(antenna, d, tol)
     out = np.zeros((x.size, antenna.num_ports, 3), dtype=np.complex128)
     for port, zeta in enumerate(antenna.slant_angles):
         a, b = _slant_components(antenna.polarization_model, zeta, th_l, ph_l, tol)

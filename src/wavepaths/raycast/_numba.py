@@ -64,6 +64,21 @@ def _clip_ray(o, t, u, lo, hi):
     return max(tmin, 0.0), min(tmax, length)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _add_ray(o, t, u, lo, hi, r, cnt, rows, start, unit, span):
+    """Append the ray ``o -> t`` clipped to the box (:func:`_clip_ray`) as row ``r`` at
+    position ``cnt`` of the float32 outputs, if its span is not empty; returns the new count."""
+    t0, t_end = _clip_ray(o, t, u, lo, hi)
+    if t_end > t0:
+        rows[cnt] = r
+        for c in range(3):
+            start[cnt, c] = o[c] + t0 * u[c]
+            unit[cnt, c] = u[c]
+        span[cnt] = t_end - t0
+        cnt += 1
+    return cnt
+
+
 @numba.njit(cache=True, nogil=True)
 def half_rays(A, B, sel, second, lo, hi):
     """The half-rays of the segments ``sel`` for Embree (EmbreeRayCaster.occluded).
@@ -92,14 +107,7 @@ def half_rays(A, B, sel, second, lo, hi):
             else:
                 o[c] = A[i, c] + 0.25 * d
                 t[c] = B[i, c]
-        t0, t_end = _clip_ray(o, t, u, lo, hi)
-        if t_end > t0:
-            rows[cnt] = r
-            for c in range(3):
-                start[cnt, c] = o[c] + t0 * u[c]
-                unit[cnt, c] = u[c]
-            span[cnt] = t_end - t0
-            cnt += 1
+        cnt = _add_ray(o, t, u, lo, hi, r, cnt, rows, start, unit, span)
     return rows[:cnt], start[:cnt], unit[:cnt], span[:cnt]
 
 
@@ -116,15 +124,7 @@ def segment_rays(origin, target, lo, hi):
     u = np.empty(3)
     cnt = 0
     for r in range(n):
-        o = origin[r]
-        t0, t_end = _clip_ray(o, target[r], u, lo, hi)
-        if t_end > t0:
-            rows[cnt] = r
-            for c in range(3):
-                start[cnt, c] = o[c] + t0 * u[c]
-                unit[cnt, c] = u[c]
-            span[cnt] = t_end - t0
-            cnt += 1
+        cnt = _add_ray(origin[r], target[r], u, lo, hi, r, cnt, rows, start, unit, span)
     return rows[:cnt], start[:cnt], unit[:cnt], span[:cnt]
 
 

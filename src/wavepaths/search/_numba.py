@@ -623,60 +623,10 @@ def keller_cone_keep(A, B, w, cos_a, cos_b, c, r, slack, keep):
     return n
 
 
-@numba.njit(cache=True, nogil=True)
-def backtrace(target, images, polygons, chain, normal, offset, ptr, polygon_tris, triangles, vertices, dual, eps,
-              eps_poly, keep, points, rejected):
-    # images.backtrace (numpy reference), candidate by candidate with an early exit: from the
-    # target back to the source, where the leg toward each image crosses its mirror's plane
-    # (geometry.segment_plane_intersection), strictly inside the leg (eps) and inside the
-    # mirror polygon (scene._numba.points_in_polygons' test, margin eps_poly); the survivors'
-    # input rows go to keep[:n] and their points, in path order, to points[:n] (n returned);
-    # rejected[0], [1] count the segment and outside-polygon rejections
-    k = polygons.shape[1]
-    n = 0
-    for i in range(chain.shape[0]):
-        c = chain[i]
-        y0, y1, y2 = target[i, 0], target[i, 1], target[i, 2]
-        ok = True
-        for j in range(k - 1, -1, -1):
-            q = polygons[c, j]
-            n0, n1, n2, d = normal[q, 0], normal[q, 1], normal[q, 2], offset[q]
-            b0, b1, b2 = images[c, j + 1, 0], images[c, j + 1, 1], images[c, j + 1, 2]
-            da = y0 * n0 + y1 * n1 + y2 * n2 - d
-            db = b0 * n0 + b1 * n1 + b2 * n2 - d
-            den = da - db
-            t = da / den if abs(den) > 0 else -1.0
-            if not (t > eps and t < 1 - eps):
-                rejected[0] += 1
-                ok = False
-                break
-            x0, x1, x2 = y0 + t * (b0 - y0), y1 + t * (b1 - y1), y2 + t * (b2 - y2)
-            inside = False
-            for s in range(ptr[q], ptr[q + 1]):
-                tr = polygon_tris[s]
-                o = triangles[tr, 0]
-                r0, r1, r2 = x0 - vertices[o, 0], x1 - vertices[o, 1], x2 - vertices[o, 2]
-                v = dual[tr, 0, 0] * r0 + dual[tr, 0, 1] * r1 + dual[tr, 0, 2] * r2
-                w = dual[tr, 1, 0] * r0 + dual[tr, 1, 1] * r1 + dual[tr, 1, 2] * r2
-                if v >= -eps_poly and w >= -eps_poly and v + w <= 1 + eps_poly:
-                    inside = True
-                    break
-            if not inside:
-                rejected[1] += 1
-                ok = False
-                break
-            points[n, j, 0], points[n, j, 1], points[n, j, 2] = x0, x1, x2
-            y0, y1, y2 = x0, x1, x2
-        if ok:
-            keep[n] = i
-            n += 1
-    return n
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def _trace_back(y0, y1, y2, images, polygons, c, normal, offset, ptr, polygon_tris, triangles, vertices, dual, eps,
                 eps_poly, out, base, step, i, rejected):
-    # one candidate of backtrace() below: writes reflection j's point at out[i, base + step * j];
+    # one candidate of backtrace(): writes reflection j's point at out[i, base + step * j];
     # returns whether the chain is valid (a rejection is counted in rejected[0] or [1])
     k = polygons.shape[1]
     for j in range(k - 1, -1, -1):
@@ -708,6 +658,24 @@ def _trace_back(y0, y1, y2, images, polygons, c, normal, offset, ptr, polygon_tr
         out[i, p, 0], out[i, p, 1], out[i, p, 2] = x0, x1, x2
         y0, y1, y2 = x0, x1, x2
     return True
+
+
+@numba.njit(cache=True, nogil=True)
+def backtrace(target, images, polygons, chain, normal, offset, ptr, polygon_tris, triangles, vertices, dual, eps,
+              eps_poly, keep, points, rejected):
+    # images.backtrace (numpy reference), candidate by candidate with an early exit: from the
+    # target back to the source, where the leg toward each image crosses its mirror's plane
+    # (geometry.segment_plane_intersection), strictly inside the leg (eps) and inside the
+    # mirror polygon (scene._numba.points_in_polygons' test, margin eps_poly); the survivors'
+    # input rows go to keep[:n] and their points, in path order, to points[:n] (n returned);
+    # rejected[0], [1] count the segment and outside-polygon rejections
+    n = 0
+    for i in range(chain.shape[0]):
+        if _trace_back(target[i, 0], target[i, 1], target[i, 2], images, polygons, chain[i], normal, offset, ptr,
+                       polygon_tris, triangles, vertices, dual, eps, eps_poly, points, 0, 1, n, rejected):
+            keep[n] = i
+            n += 1
+    return n
 
 
 @numba.njit(cache=True, nogil=True)

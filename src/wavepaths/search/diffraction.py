@@ -439,6 +439,19 @@ def _diffraction_candidates_numpy(scene, ctx, a, b, rx, rx_lv, rx_offset, stats,
     stats[f"{tag}_rejected_outside_polygon"] += rej1["outside_polygon"] + rej2["outside_polygon"]
     if amp is not None:
         amp = amp[ok2][ok1]
+    # post in path order after the diffraction
+    verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post[:, ::-1], rx[rx_lv.source[e]][:, None, :]],
+                           axis=1)
+    return _pending_or_batch(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, tag, e, d, sec, c, verts, amp, pending)
+
+
+def _pending_or_batch(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, tag, e, d, sec, c, verts, amp,
+                      pending: list | None) -> list[PathBatch]:
+    """The end of :func:`_diffraction_candidates` (both forms) on the back-traced candidates
+    (receiver-side rows ``e``, dihedra ``d``, sectors ``sec``, transmitter-side rows ``c``,
+    path vertices ``verts``, amplitude bounds ``amp`` or ``None``): the pruning of weak ones,
+    then their pending record, or their occlusion and path batch."""
+    tx_lv = ctx.levels[a]
     if amp is not None and ctx.options.prune_db is not None:
         # pruned after the back-traces, so that the count bounds the paths dropped (not the
         # candidates): before the casts and the fields, which cost the most per path
@@ -447,15 +460,11 @@ def _diffraction_candidates_numpy(scene, ctx, a, b, rx, rx_lv, rx_offset, stats,
         stats["pruned_paths_upper_bound"] += int(weak.sum())
         stats[f"{tag}_pruned_candidates"] += int(weak.sum())
         keep = ~weak
-        e, d, sec, c, P, pre, post, amp = (e[keep], d[keep], sec[keep], c[keep], P[keep], pre[keep], post[keep],
-                                           amp[keep])
+        e, d, sec, c, verts, amp = e[keep], d[keep], sec[keep], c[keep], verts[keep], amp[keep]
     # the true dihedron: the faces bounding the sector (seed §3.3)
     f0 = ctx.sectors.face[d, sec]
     fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
-    post = post[:, ::-1]  # path order after the diffraction
     post_polys = rx_lv.polygons[e][:, ::-1]
-    rx_pos = rx[rx_lv.source[e]]
-    verts = np.concatenate([tx_lv.images[c, :1], pre, P[:, None, :], post, rx_pos[:, None, :]], axis=1)
     pend = PendingDiffraction(a, b, tx_lv.source[c], rx_lv.source[e], amp, (d, c, f0, fn, verts, post_polys))
     if pending is not None:
         pending.append(pend)
@@ -498,21 +507,7 @@ def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, sta
         wedge = ctx.sectors.width[d, sec]
         amp = _diffraction_amplitude_bound(ctx, rside.phi[rr], tside.phi[ss], wedge / np.pi, tside.t[ss], tside.rho[ss],
                                            rside.t[rr], rside.rho[rr], t[keep])
-    if amp is not None and ctx.options.prune_db is not None:
-        direct = np.linalg.norm(rx[rx_lv.source[e]] - ctx.tx[tx_lv.source[c]], axis=1)
-        weak = amp * direct < 10 ** (-ctx.options.prune_db / 20)
-        stats["pruned_paths_upper_bound"] += int(weak.sum())
-        stats[f"{tag}_pruned_candidates"] += int(weak.sum())
-        strong = ~weak
-        e, d, sec, c, verts, amp = e[strong], d[strong], sec[strong], c[strong], verts[strong], amp[strong]
-    f0 = ctx.sectors.face[d, sec]
-    fn = ctx.sectors.face[d, np.mod(sec + 1, ctx.sectors.count[d])]
-    post_polys = rx_lv.polygons[e][:, ::-1]
-    pend = PendingDiffraction(a, b, tx_lv.source[c], rx_lv.source[e], amp, (d, c, f0, fn, verts, post_polys))
-    if pending is not None:
-        pending.append(pend)
-        return []
-    return [finish_diffraction(scene, ctx, pend, rx_offset, stats)]
+    return _pending_or_batch(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, tag, e, d, sec, c, verts, amp, pending)
 
 
 def finish_diffraction(scene: "Scene", ctx: TxContext, pend: PendingDiffraction, rx_offset: int, stats: Counter,
