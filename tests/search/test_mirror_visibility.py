@@ -143,7 +143,9 @@ def test_hidden_mirrors_are_hidden_by_the_occlusion_rule(size, rng):
     src = _outdoor(rng, scene, 6) if size == 1 else _groups_of_four(rng, scene, 6)
     group = np.arange(len(src)) // size  # consecutive points, as built
     hidden, rays = hidden_mirrors(scene, src, group, mirrors)
-    assert rays == hidden.size  # one hint ray per pair (every hull is small here)
+    every, rays_every = hidden_mirrors(scene, src, group, mirrors, pilot_stride=1)
+    assert rays_every == hidden.size  # one hint ray per pair (every hull is small here)
+    assert rays < rays_every and (hidden | ~every).all()  # shared hints: fewer rays, nothing lost
     assert hidden.sum() >= 10, "almost nothing hidden: the test would prove little"
     assert not hidden.all(axis=1).any()  # and every group still sees something
     for g, m in zip(*np.nonzero(hidden)):
@@ -152,6 +154,28 @@ def test_hidden_mirrors_are_hidden_by_the_occlusion_rule(size, rng):
         a = np.repeat(members, len(pts), axis=0)
         b = np.tile(pts, (len(members), 1))
         assert exact.occluded(a, b).all(), (g, m)
+
+
+def test_occluder_hints_shared_by_neighbouring_receivers(rng):
+    """A row of receivers 0.5 m apart: with the occluders of every fourth receiver's rays as
+    hints, most hidden pairs of the others need no ray, every pair proven with one ray per pair is
+    still proven, and every pair proven only through a hint is hidden by the float64 rule."""
+    scene = _city(rng)
+    exact = NumpyRayCaster(scene)
+    mirrors = np.nonzero(reflecting_polygons(scene, True))[0]
+    start = _outdoor(rng, scene, 1)[0]
+    src = _outdoor_points(scene, start + np.outer(np.arange(16) * 0.5, [1.0, 0.3, 0.0]))
+    group = np.arange(len(src))  # one receiver per group, in the row's order
+    every, rays_every = hidden_mirrors(scene, src, group, mirrors, pilot_stride=1)
+    hinted, rays = hidden_mirrors(scene, src, group, mirrors, pilot_stride=4)
+    assert every.sum() >= 10
+    # a visible mirror always costs a ray; most hidden ones of the non-pilots none
+    saved, could = rays_every - rays, int(every[group % 4 != 0].sum())
+    assert saved >= 0.5 * could, (saved, could)
+    assert not (every & ~hinted).any()
+    for g, m in zip(*np.nonzero(hinted & ~every)):
+        pts = _points_on(scene, int(mirrors[m]), rng, 40)
+        assert exact.occluded(np.repeat(src[g : g + 1], len(pts), axis=0), pts).all(), (g, m)
 
 
 def test_a_wall_behind_a_wall_is_hidden_and_a_wall_half_behind_is_not():

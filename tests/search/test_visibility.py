@@ -160,3 +160,27 @@ def test_image_windows_hold_every_edge_point_whose_leg_from_the_mirror_is_clear(
     # not vacuous: clear legs exist, and some pairs are proven hidden beyond their apertures
     assert clear.any()
     assert v.hidden.sum() >= 5
+
+
+def test_image_windows_in_blocks_equal_one_call(monkeypatch):
+    """The context computes the images' windows in blocks of pairs (bounded memory); a block
+    boundary changes nothing: each pair's march is its own."""
+    from wavepaths.search import context
+    from wavepaths.search.images import build_image_levels
+    from wavepaths.search.visibility import aperture_windows
+
+    scene = load_scene("street_canyon")
+    lv = build_image_levels(scene, np.array([[-60.0, 0.0, 10.0]]), 1, True)[1]
+    d_all = np.nonzero(scene.dihedra.diffracting)[0]
+    c = np.repeat(np.arange(len(lv)), len(d_all))
+    d = np.tile(d_all, len(lv))
+    lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
+    keep = lo <= hi
+    c, d, lo, hi = c[keep], d[keep], lo[keep], hi[keep]
+    one = visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
+    monkeypatch.setattr(context, "WINDOW_BLOCK", 37)
+    got = context._windows_in_blocks(scene, lv, c, d, lo, hi)
+    assert len(c) > 5 * 37 and one.hidden.any()  # several blocks, and something proven
+    for f in ("lo", "hi", "open0", "open1"):
+        assert np.array_equal(getattr(got, f), getattr(one, f)), f
+    assert got.rays == one.rays and got.tau == one.tau

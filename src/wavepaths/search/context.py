@@ -138,6 +138,29 @@ def _source_pairs(
     yield from chains_meeting_edges(scene, lv, apertures, edges, compiled=compiled)
 
 
+WINDOW_BLOCK = 1 << 19
+"""(image, edge) pairs per call of the images' visibility windows: the march holds some
+thirty arrays per pair, and munich's order-2 sources (tens of millions of pairs) at once
+took over 24 GB."""
+
+
+def _windows_in_blocks(scene: "Scene", lv: ImageLevel, c: np.ndarray, d: np.ndarray, lo: np.ndarray,
+                       hi: np.ndarray) -> VisibilityWindows:
+    """:func:`~wavepaths.search.visibility.visibility_windows` of the image chains ``c`` of
+    ``lv`` and dihedra ``d`` within their aperture windows ``[lo, hi]``, ``WINDOW_BLOCK``
+    pairs at a time (each pair's march is its own: the same windows as one call)."""
+    parts = []
+    for s in range(0, len(c), WINDOW_BLOCK):
+        cc, sl = c[s : s + WINDOW_BLOCK], slice(s, s + WINDOW_BLOCK)
+        parts.append(visibility_windows(scene, lv.last[cc], d[sl], start=(lo[sl], hi[sl]), through=lv.polygons[cc, -1]))
+    if len(parts) == 1:
+        return parts[0]
+    if not parts:
+        return visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
+    cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("lo", "hi", "open0", "open1")]
+    return VisibilityWindows(*cat, parts[0].tau, sum(p.rays for p in parts), max(p.rounds for p in parts))
+
+
 def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> TxContext:
     """Build the :class:`TxContext` of transmitters ``tx`` (m, 3) for ``options``."""
     tx = np.asarray(tx, dtype=np.float64).reshape(-1, 3)
@@ -213,7 +236,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
                 else:
                     # the leg from the last mirror to the edge: the part of each aperture window
                     # not proven hidden beyond the mirror; pairs hidden along all of it go
-                    vis = visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
+                    vis = _windows_in_blocks(scene, lv, c, d, lo, hi)
                     seen = ~vis.hidden
                     stats[f"diffraction_sources_order_{a}_culled_hidden"] = int((~seen).sum())
                     stats["visibility_rays"] = stats.get("visibility_rays", 0) + vis.rays

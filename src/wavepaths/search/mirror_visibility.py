@@ -59,6 +59,8 @@ GROUP_SIZE = 16
 """Sources per group (consecutive along a Morton curve): one box and one ray per mirror."""
 PAIR_BLOCK = 1 << 14
 """(group, mirror) pairs tested at once (bounds the (pairs, 8, hull, hull) temporaries)."""
+PILOT_STRIDE = 8
+"""Groups per occluder hint in :func:`hidden_mirrors` (one pilot group casts, the next seven reuse)."""
 
 
 @dataclass(frozen=True)
@@ -220,7 +222,8 @@ def source_groups(sources: np.ndarray, size: int = GROUP_SIZE) -> np.ndarray:
 
 
 def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirrors: np.ndarray,
-                   candidates: np.ndarray | None = None, compiled: bool | None = None) -> tuple[np.ndarray, int]:
+                   candidates: np.ndarray | None = None, compiled: bool | None = None,
+                   pilot_stride: int = PILOT_STRIDE) -> tuple[np.ndarray, int]:
     """Which (group, mirror) pairs are proven hidden: every point of the mirror from every source of the group.
 
     Parameters
@@ -237,6 +240,13 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     compiled : bool, optional
         Run the proof pair by pair as a compiled loop (``_numba.behind``, numba): by default
         when numba is installed; ``False`` runs the numpy reference (:func:`_behind`).
+    pilot_stride : int
+        Occluder hints are shared along the groups' Morton order: the groups ``0, s, 2s, ...``
+        (the pilots) cast a ray per pair; the others first try, for each mirror, the occluder
+        their pilot's ray named, and cast a ray only when that proof fails. Neighbouring
+        receivers of a map are mostly hidden from a mirror by the same wall, so most rays
+        are saved; a hint is only a candidate ``Q`` for the proof, which decides alone.
+        ``1`` casts a ray for every pair.
 
     Returns
     -------
@@ -271,27 +281,59 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     gi, mi = np.nonzero(candidates) if candidates is not None else np.divmod(np.arange(g * m), m)
     ok = hulls.num_points[mirrors[mi]] > 0
     gi, mi = gi[ok], mi[ok]
-    rays = 0
-    for s in range(0, len(gi), PAIR_BLOCK):
-        G, M = gi[s : s + PAIR_BLOCK], mi[s : s + PAIR_BLOCK]
+
+    def prove(G: np.ndarray, M: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """(k,) bool: the proof for pairs (G, M) with the candidate occluders Q (-1: none)."""
         P = mirrors[M]
-        tri = scene.raycaster.first_triangle(centre[G], hulls.centre[P])
-        rays += len(G)
-        Q = np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
         use = (Q >= 0) & (Q != P)
         use[use] = hulls.occluder[Q[use]]
+        out = np.zeros(len(G), bool)
         idx = np.nonzero(use)[0]
         if len(idx) == 0:
-            continue
+            return out
         if kernel is None:
-            hidden[G[idx], M[idx]] = _behind(scene, hulls, box[G[idx]], P[idx], Q[idx], margin)
+            out[idx] = _behind(scene, hulls, box[G[idx]], P[idx], Q[idx], margin)
         else:
-            out = np.empty(len(idx), np.bool_)
+            got = np.empty(len(idx), np.bool_)
             c = np.ascontiguousarray
             kernel(c(box[G[idx]]), c(P[idx], dtype=np.int64), c(Q[idx], dtype=np.int64), hulls.points,
                    hulls.num_points, scene.polygon_normal, scene.polygon_offset, hulls.edge_normal,
-                   hulls.edge_offset, hulls.count, float(margin), out)
-            hidden[G[idx], M[idx]] = out
+                   hulls.edge_offset, hulls.count, float(margin), got)
+            out[idx] = got
+        return out
+
+    def cast(G: np.ndarray, M: np.ndarray) -> np.ndarray:
+        """(k,) int64: the polygon a ray from the group's centre to the mirror's centre meets first."""
+        tri = scene.raycaster.first_triangle(centre[G], hulls.centre[mirrors[M]])
+        return np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
+
+    stride = max(int(pilot_stride), 1)
+    pilot = gi % stride == 0
+    lead = np.nonzero(pilot)[0]
+    hint = np.full((g + stride - 1) // stride * m if stride > 1 else 0, -1, np.int64)
+    rays = 0
+    # the pilots (every group when stride is 1): a ray per pair; their occluders become hints
+    for s in range(0, len(lead), PAIR_BLOCK):
+        sel = lead[s : s + PAIR_BLOCK]
+        G, M = gi[sel], mi[sel]
+        Q = cast(G, M)
+        rays += len(G)
+        hidden[G, M] = prove(G, M, Q)
+        if stride > 1:
+            hint[(G // stride) * m + M] = Q
+    # the others: their pilot's occluder first, a ray when that proof fails
+    rest = np.nonzero(~pilot)[0]
+    for s in range(0, len(rest), PAIR_BLOCK):
+        sel = rest[s : s + PAIR_BLOCK]
+        G, M = gi[sel], mi[sel]
+        Qh = hint[(G // stride) * m + M]
+        done = prove(G, M, Qh)
+        hidden[G[done], M[done]] = True
+        G, M, Qh = G[~done], M[~done], Qh[~done]
+        Q = cast(G, M)
+        rays += len(G)
+        again = Q != Qh  # the same occluder would fail the same proof
+        hidden[G[again], M[again]] = prove(G[again], M[again], Q[again])
     return hidden, rays
 
 
