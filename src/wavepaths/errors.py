@@ -18,3 +18,8 @@ class SceneError(WavepathsError):
 
 class DependencyError(WavepathsError):
     """An optional dependency (Sionna RT, libLLVM, dask) that is missing or unusable."""
+
+
+class ImageTreeTooLarge(WavepathsError):
+    """An image tree that would hold more chains than the guard allows
+    (:data:`wavepaths.search.images.MAX_IMAGES`)."""

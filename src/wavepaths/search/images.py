@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
-from ..errors import WavepathsError
+from ..errors import ImageTreeTooLarge, WavepathsError
 from ..scene.closed import points_inside_closed
 from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree
 from .geometry import mirror_points, segment_plane_intersection
@@ -237,7 +237,7 @@ def build_image_levels(
 
     Raises
     ------
-    WavepathsError
+    ImageTreeTooLarge
         When an order holds more than ``MAX_IMAGES`` chains.
     """
     sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
@@ -270,7 +270,7 @@ def build_image_levels(
                 got_q.append(q[keep])
                 total += int(keep.sum())
                 if total > MAX_IMAGES:
-                    raise WavepathsError(
+                    raise ImageTreeTooLarge(
                         f"the image tree of order {k} holds more than {MAX_IMAGES:,} chains: lower "
                         f"`max_reflections` (or `diffraction_reflections`) or simplify the scene"
                     )

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .beams import reflection_candidates
+from ..errors import ImageTreeTooLarge
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
 from .diffraction import diffraction_tile, spatial_order
@@ -105,6 +106,47 @@ def reflection_tile(
     return out
 
 
+def _diffraction_part(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int, stats: Counter,
+                      grazing: np.ndarray, pending: list | None) -> list[PathBatch]:
+    """The diffracted paths of :func:`trace_tile`: the receivers' image trees, then every (a, b).
+
+    When the receivers' trees together exceed the guard of
+    :func:`~wavepaths.search.images.build_image_levels` (munich at two reflections after the
+    edge: some 1.7 M order-2 chains per street-level receiver), the receivers are split in
+    halves, each traced alone (their paths do not depend on each other); a single receiver
+    whose own tree exceeds it raises :class:`~wavepaths.errors.ImageTreeTooLarge`.
+    """
+    opts = ctx.options
+    try:
+        rx_stats: dict = {}
+        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers, rx_stats,
+                                       compiled=None if opts.compiled else False,
+                                       visibility_group=0 if "mirror_visibility" in opts.disable_culling
+                                       else RX_VISIBILITY_GROUP)
+    except ImageTreeTooLarge:
+        if len(rx) < 2:
+            raise
+        half = len(rx) // 2
+        stats["rx_tile_splits"] += 1
+        out = []
+        for lo, hi in ((0, half), (half, len(rx))):
+            first = len(pending) if pending is not None else 0
+            out += _diffraction_part(scene, ctx, rx[lo:hi], rx_offset + lo, stats, grazing[:, lo:hi], pending)
+            for pend in (pending or [])[first:]:  # their receivers, tile-local: from this half's start
+                pend.rx = pend.rx + lo
+        return out
+    stats.update({f"rx_{k}": v for k, v in rx_stats.items()})
+    rx_levels = [spatial_order(lv) for lv in rx_levels]
+    tree = opts.diffraction_reflections >= 1 and ctx.apertures is not None and bool(ctx.source_edges)
+    out = []
+    for a in range(opts.diffraction_reflections + 1):
+        # the receiver side queries the edges that the order-a sources reach
+        edges = ctx.source_edges[a] if tree else None
+        for b in range(opts.diffraction_reflections + 1 - a):
+            out += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges, pending)
+    return out
+
+
 def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 0,
                pending: list | None = None) -> tuple[list[PathBatch], Counter]:
     """All paths of ``ctx.options`` from the context's transmitters to the receivers ``rx``.
@@ -118,20 +160,7 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     batches: list[PathBatch] = []
     grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
-        rx_stats: dict = {}
-        rx_levels = build_image_levels(scene, rx, opts.diffraction_reflections, opts.skip_absorbers, rx_stats,
-                                       compiled=None if opts.compiled else False,
-                                       visibility_group=0 if "mirror_visibility" in opts.disable_culling
-                                       else RX_VISIBILITY_GROUP)
-        stats.update({f"rx_{k}": v for k, v in rx_stats.items()})
-        rx_levels = [spatial_order(lv) for lv in rx_levels]
-        tree = opts.diffraction_reflections >= 1 and ctx.apertures is not None and bool(ctx.source_edges)
-        for a in range(opts.diffraction_reflections + 1):
-            # the receiver side queries the edges that the order-a sources reach
-            edges = ctx.source_edges[a] if tree else None
-            for b in range(opts.diffraction_reflections + 1 - a):
-                batches += diffraction_tile(scene, ctx, a, b, rx, rx_levels, rx_offset, stats, grazing, edges,
-                                            pending)
+        batches += _diffraction_part(scene, ctx, rx, rx_offset, stats, grazing, pending)
     if opts.los:
         batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
     for k in range(1, opts.max_reflections + 1):
