@@ -600,24 +600,14 @@ def behind(box, P, Q, points, num_points, normal, offset, edge_normal, edge_offs
 
 
 @numba.njit(cache=True, nogil=True)
-def keller_cone_keep(A, B, w, cos_a, cos_b, c, r, slack, keep):
-    # diffraction.keller_cone_keep (numpy reference), source by source: whether the Keller
-    # cone of each (source, dihedron) can reach the sphere (c, r); writes keep, returns the count
+def keller_cone_keep(inv, reach_a, reach_b, cos_a, cos_b, keep):
+    # diffraction.keller_cone_keep (numpy reference), source by source: the source's cone
+    # cosines at the edge's ends against its dihedron's reach of the receivers' sphere;
+    # writes keep, returns the count
     n = 0
-    c0, c1, c2 = c[0], c[1], c[2]
-    for i in range(A.shape[0]):
-        w0, w1, w2 = w[i, 0], w[i, 1], w[i, 2]
-        v0, v1, v2 = c0 - A[i, 0], c1 - A[i, 1], c2 - A[i, 2]
-        dist = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        th = math.acos(min(max((v0 * w0 + v1 * w1 + v2 * w2) / max(dist, 1e-300), -1.0), 1.0))
-        de = math.asin(min(max(r / max(dist, 1e-300), 0.0), 1.0)) if dist > r else math.pi
-        ok = math.cos(max(th - de, 0.0)) >= cos_a[i] - slack
-        if ok:
-            v0, v1, v2 = c0 - B[i, 0], c1 - B[i, 1], c2 - B[i, 2]
-            dist = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-            th = math.acos(min(max((v0 * w0 + v1 * w1 + v2 * w2) / max(dist, 1e-300), -1.0), 1.0))
-            de = math.asin(min(max(r / max(dist, 1e-300), 0.0), 1.0)) if dist > r else math.pi
-            ok = math.cos(min(th + de, math.pi)) <= cos_b[i] + slack
+    for i in range(inv.shape[0]):
+        j = inv[i]
+        ok = cos_a[i] <= reach_a[j] and cos_b[i] >= reach_b[j]
         keep[i] = ok
         n += ok
     return n

@@ -36,29 +36,38 @@ DENSE_RECEIVER_SIDE_MAX_DIHEDRA = 4096
 @dataclass(frozen=True)
 class KellerFrame:
     """Per diffraction source (image S, dihedron from A to B, unit direction ``w``): the
-    edge's ends and the cosines of the incident cone at them, ``cos beta_X = w.(X - S)/|X - S|``
-    (:func:`keller_cone_keep`). Receiver-independent: built once per context and order."""
+    cosines of the incident cone at the edge's ends, ``cos beta_X = w.(X - S)/|X - S|``
+    (:func:`keller_cone_keep`); the edges themselves once per distinct dihedron (munich's
+    25 M order-2 sources lie on 30 k dihedra). Receiver-independent: built once per context
+    and order."""
 
-    A: np.ndarray  # (c, 3) [m]
-    B: np.ndarray  # (c, 3) [m]
-    w: np.ndarray  # (c, 3)
+    dihedra: np.ndarray  # (u,) int64, the distinct dihedra of the sources
+    inv: np.ndarray  # (c,) int64, each source's row in ``dihedra``
+    A: np.ndarray  # (u, 3) [m]
+    B: np.ndarray  # (u, 3) [m]
+    w: np.ndarray  # (u, 3)
     cos_a: np.ndarray  # (c,)
     cos_b: np.ndarray  # (c,)
 
 
+FRAME_BLOCK = 1 << 20
+"""Sources per block when a :class:`KellerFrame` is built (bounds its temporaries)."""
+
+
 def keller_frame(dihedra, src, sources: np.ndarray) -> KellerFrame:
     """The :class:`KellerFrame` of the sources ``src`` at image points ``sources`` (c, 3)."""
-    d = src.dihedron
-    w = dihedra.direction[d]
-    A = dihedra.origin[d]
-    B = A + dihedra.length[d][:, None] * w
-
-    def cos_to(x_from, x_to):
-        v = x_to - x_from
-        return np.einsum("ij,ij->i", v, w) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
-
-    c = np.ascontiguousarray
-    return KellerFrame(c(A), c(B), c(w), cos_to(sources, A), cos_to(sources, B))
+    ud, inv = np.unique(src.dihedron, return_inverse=True)
+    w = np.ascontiguousarray(dihedra.direction[ud])
+    A = np.ascontiguousarray(dihedra.origin[ud])
+    B = A + dihedra.length[ud][:, None] * w
+    k = len(inv)
+    cos_a, cos_b = np.empty(k), np.empty(k)
+    for s in range(0, k, FRAME_BLOCK):
+        i, S = inv[s : s + FRAME_BLOCK], sources[s : s + FRAME_BLOCK]
+        for X, out in ((A, cos_a), (B, cos_b)):
+            v = X[i] - S
+            out[s : s + len(i)] = np.einsum("ij,ij->i", v, w[i]) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+    return KellerFrame(ud, inv.astype(np.int64).ravel(), A, B, w, cos_a, cos_b)
 
 
 def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = False) -> np.ndarray | None:
@@ -70,20 +79,16 @@ def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = F
     ``cos beta_X = w.(X - S)/|X - S|`` (the diffracted cone's opening equals the incident
     angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
     with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
-    ``compiled``: the same expressions in :func:`wavepaths.search._numba.keller_cone_keep`
-    (this numpy code is its reference).
+    The sphere's side depends on the dihedron only: ``cos(max(theta_A - delta_A, 0))`` and
+    ``cos(min(theta_B + delta_B, pi))`` are found once per distinct dihedron, and each
+    source compares its two cosines with them. ``compiled``: that comparison as one
+    compiled loop (:func:`wavepaths.search._numba.keller_cone_keep`; the same values).
     """
-    if len(frame.A) == 0 or len(targets) == 0:
+    if len(frame.inv) == 0 or len(targets) == 0:
         return None
     c = targets.mean(axis=0)
     r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
     slack = 1e-9
-    if compiled and kernels.available():
-        from . import _numba
-
-        keep = np.empty(len(frame.A), dtype=np.bool_)
-        n = _numba.keller_cone_keep(frame.A, frame.B, frame.w, frame.cos_a, frame.cos_b, c, r, slack, keep)
-        return None if n == len(keep) else keep
     w = frame.w
 
     def angle_range(X):
@@ -95,9 +100,15 @@ def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = F
 
     th_a, de_a = angle_range(frame.A)
     th_b, de_b = angle_range(frame.B)
-    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) >= frame.cos_a - slack
-    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) <= frame.cos_b + slack
-    keep = reach_a & reach_b
+    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) + slack  # per dihedron: reached iff cos_a <= reach_a
+    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) - slack  # ... and cos_b >= reach_b
+    if compiled and kernels.available():
+        from . import _numba
+
+        keep = np.empty(len(frame.inv), dtype=np.bool_)
+        n = _numba.keller_cone_keep(frame.inv, reach_a, reach_b, frame.cos_a, frame.cos_b, keep)
+        return None if n == len(keep) else keep
+    keep = (frame.cos_a <= reach_a[frame.inv]) & (frame.cos_b >= reach_b[frame.inv])
     return None if keep.all() else keep
 
 
