@@ -599,11 +599,30 @@ def behind(box, P, Q, points, num_points, normal, offset, edge_normal, edge_offs
     return out
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _sphere_reach(x0, x1, x2, w0, w1, w2, c, r):
+    # diffraction.keller_cone_keep's angle_range at one edge end X: the angle theta between
+    # the edge direction and X -> c, and the sphere's angular radius delta seen from X
+    v0, v1, v2 = c[0] - x0, c[1] - x1, c[2] - x2
+    dist = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    th = math.acos(min(max((v0 * w0 + v1 * w1 + v2 * w2) / max(dist, 1e-300), -1.0), 1.0))
+    de = math.asin(min(max(r / max(dist, 1e-300), 0.0), 1.0)) if dist > r else math.pi
+    return th, de
+
+
 @numba.njit(cache=True, nogil=True)
-def keller_cone_keep(inv, reach_a, reach_b, cos_a, cos_b, keep):
-    # diffraction.keller_cone_keep (numpy reference), source by source: the source's cone
-    # cosines at the edge's ends against its dihedron's reach of the receivers' sphere;
-    # writes keep, returns the count
+def keller_cone_keep(A, B, w, inv, cos_a, cos_b, c, r, slack, keep):
+    # diffraction.keller_cone_keep (numpy reference): the sphere's reach from each distinct
+    # dihedron's ends, then source by source the cone cosines against it; writes keep,
+    # returns the count
+    u = A.shape[0]
+    reach_a = np.empty(u)
+    reach_b = np.empty(u)
+    for j in range(u):
+        th, de = _sphere_reach(A[j, 0], A[j, 1], A[j, 2], w[j, 0], w[j, 1], w[j, 2], c, r)
+        reach_a[j] = math.cos(max(th - de, 0.0)) + slack
+        th, de = _sphere_reach(B[j, 0], B[j, 1], B[j, 2], w[j, 0], w[j, 1], w[j, 2], c, r)
+        reach_b[j] = math.cos(min(th + de, math.pi)) - slack
     n = 0
     for i in range(inv.shape[0]):
         j = inv[i]

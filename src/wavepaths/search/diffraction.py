@@ -81,14 +81,20 @@ def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = F
     with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
     The sphere's side depends on the dihedron only: ``cos(max(theta_A - delta_A, 0))`` and
     ``cos(min(theta_B + delta_B, pi))`` are found once per distinct dihedron, and each
-    source compares its two cosines with them. ``compiled``: that comparison as one
-    compiled loop (:func:`wavepaths.search._numba.keller_cone_keep`; the same values).
+    source compares its two cosines with them. ``compiled``: both steps as compiled loops
+    (:func:`wavepaths.search._numba.keller_cone_keep`; the same expressions).
     """
     if len(frame.inv) == 0 or len(targets) == 0:
         return None
     c = targets.mean(axis=0)
     r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
     slack = 1e-9
+    if compiled and kernels.available():
+        from . import _numba
+
+        keep = np.empty(len(frame.inv), dtype=np.bool_)
+        n = _numba.keller_cone_keep(frame.A, frame.B, frame.w, frame.inv, frame.cos_a, frame.cos_b, c, r, slack, keep)
+        return None if n == len(keep) else keep
     w = frame.w
 
     def angle_range(X):
@@ -102,12 +108,6 @@ def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = F
     th_b, de_b = angle_range(frame.B)
     reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) + slack  # per dihedron: reached iff cos_a <= reach_a
     reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) - slack  # ... and cos_b >= reach_b
-    if compiled and kernels.available():
-        from . import _numba
-
-        keep = np.empty(len(frame.inv), dtype=np.bool_)
-        n = _numba.keller_cone_keep(frame.inv, reach_a, reach_b, frame.cos_a, frame.cos_b, keep)
-        return None if n == len(keep) else keep
     keep = (frame.cos_a <= reach_a[frame.inv]) & (frame.cos_b >= reach_b[frame.inv])
     return None if keep.all() else keep
 
