@@ -38,8 +38,8 @@ class KellerFrame:
     """Per diffraction source (image S, dihedron from A to B, unit direction ``w``): the
     cosines of the incident cone at the edge's ends, ``cos beta_X = w.(X - S)/|X - S|``
     (:func:`keller_cone_keep`); the edges themselves once per distinct dihedron (munich's
-    25 M order-2 sources lie on 30 k dihedra). Receiver-independent: built once per context
-    and order."""
+    25 M order-2 sources lie on at most its 36 k dihedra). Receiver-independent: built once
+    per context and order."""
 
     dihedra: np.ndarray  # (u,) int64, the distinct dihedra of the sources
     inv: np.ndarray  # (c,) int64, each source's row in ``dihedra``
