@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .beams import reflection_candidates
 from ..errors import ImageTreeTooLarge
+from .beams import reflection_candidates
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
 from .diffraction import diffraction_tile, spatial_order
@@ -112,7 +112,7 @@ def _diffraction_part(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset:
 
     When the receivers' trees together exceed the guard of
     :func:`~wavepaths.search.images.build_image_levels` (munich at two reflections after the
-    edge: some 1.7 M order-2 chains per street-level receiver), the receivers are split in
+    edge: up to 1.7 M order-2 chains per street-level receiver), the receivers are split in
     halves, each traced alone (their paths do not depend on each other); a single receiver
     whose own tree exceeds it raises :class:`~wavepaths.errors.ImageTreeTooLarge`.
     """
