@@ -119,6 +119,21 @@ def test_aperture_window_holds_every_point_the_back_trace_accepts():
         assert (lo > hi).mean() > 0.5  # and most pairs are proven to carry no path
 
 
+def _order_1_pairs_with_apertures(scene, tx):
+    """The transmitters' order-1 images and every (image, diffracting edge) pair with a
+    non-empty aperture window: ``(level, chain, dihedron, lo, hi)``."""
+    from wavepaths.search.images import build_image_levels
+    from wavepaths.search.visibility import aperture_windows
+
+    d_all = np.nonzero(scene.dihedra.diffracting)[0]
+    lv = build_image_levels(scene, tx, 1, True)[1]
+    c = np.repeat(np.arange(len(lv)), len(d_all))
+    d = np.tile(d_all, len(lv))
+    lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
+    keep = lo <= hi
+    return lv, c[keep], d[keep], lo[keep], hi[keep]
+
+
 @pytest.mark.parametrize("scene_name", ["street_canyon", "city"])
 def test_image_windows_hold_every_edge_point_whose_leg_from_the_mirror_is_clear(scene_name, rng):
     """Soundness of the windows of image sources (``through``): for transmitter images of
@@ -126,8 +141,7 @@ def test_image_windows_hold_every_edge_point_whose_leg_from_the_mirror_is_clear(
     last mirror (the back-trace's reflection point) to the point is clear by the float64
     rule, the point must lie in its window (within tau) or at an open end. And the
     windows must prove something beyond the aperture windows."""
-    from wavepaths.search.images import backtrace, build_image_levels
-    from wavepaths.search.visibility import aperture_windows
+    from wavepaths.search.images import backtrace
 
     if scene_name == "street_canyon":
         scene = load_scene("street_canyon")
@@ -139,13 +153,7 @@ def test_image_windows_hold_every_edge_point_whose_leg_from_the_mirror_is_clear(
         tx = np.array([[0.0, 0.0, 30.0], [5.0, -70.0, 2.0]])
     exact = NumpyRayCaster(scene)
     dh = scene.dihedra
-    d_all = np.nonzero(dh.diffracting)[0]
-    lv = build_image_levels(scene, tx, 1, True)[1]
-    c = np.repeat(np.arange(len(lv)), len(d_all))
-    d = np.tile(d_all, len(lv))
-    lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
-    keep = lo <= hi
-    c, d, lo, hi = c[keep], d[keep], lo[keep], hi[keep]
+    lv, c, d, lo, hi = _order_1_pairs_with_apertures(scene, tx)
     v = visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
     k = 41
     t = np.linspace(0.0, 1.0, k)[None, :] * dh.length[d][:, None]
@@ -166,17 +174,9 @@ def test_image_windows_in_blocks_equal_one_call(monkeypatch):
     """The context computes the images' windows in blocks of pairs (bounded memory); a block
     boundary changes nothing: each pair's march is its own."""
     from wavepaths.search import context
-    from wavepaths.search.images import build_image_levels
-    from wavepaths.search.visibility import aperture_windows
 
     scene = load_scene("street_canyon")
-    lv = build_image_levels(scene, np.array([[-60.0, 0.0, 10.0]]), 1, True)[1]
-    d_all = np.nonzero(scene.dihedra.diffracting)[0]
-    c = np.repeat(np.arange(len(lv)), len(d_all))
-    d = np.tile(d_all, len(lv))
-    lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
-    keep = lo <= hi
-    c, d, lo, hi = c[keep], d[keep], lo[keep], hi[keep]
+    lv, c, d, lo, hi = _order_1_pairs_with_apertures(scene, np.array([[-60.0, 0.0, 10.0]]))
     one = visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
     monkeypatch.setattr(context, "WINDOW_BLOCK", 37)
     got = context._windows_in_blocks(scene, lv, c, d, lo, hi)
