@@ -78,6 +78,14 @@ def _add_ray(o, t, lo, hi, r, cnt, rows, start, unit, span):
     return cnt
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _ray_buffers(n):
+    """The outputs of :func:`_add_ray` for up to ``n`` rays: rows (int64), float32 start
+    points, unit directions and spans."""
+    return (np.empty(n, dtype=np.int64), np.empty((n, 3), dtype=np.float32), np.empty((n, 3), dtype=np.float32),
+            np.empty(n, dtype=np.float32))
+
+
 @numba.njit(cache=True, nogil=True)
 def half_rays(A, B, sel, second, lo, hi):
     """The half-rays of the segments ``sel`` for Embree (EmbreeRayCaster.occluded).
@@ -88,21 +96,16 @@ def half_rays(A, B, sel, second, lo, hi):
     points, unit directions and lengths.
     """
     n = sel.shape[0]
-    rows = np.empty(n, dtype=np.int64)
-    start = np.empty((n, 3), dtype=np.float32)
-    unit = np.empty((n, 3), dtype=np.float32)
-    span = np.empty(n, dtype=np.float32)
+    rows, start, unit, span = _ray_buffers(n)
     cnt = 0
     for r in range(n):
         i = sel[r]
         a = (A[i, 0], A[i, 1], A[i, 2])
         b = (B[i, 0], B[i, 1], B[i, 2])
         if second:
-            o = (b[0] - 0.25 * (b[0] - a[0]), b[1] - 0.25 * (b[1] - a[1]), b[2] - 0.25 * (b[2] - a[2]))
-            cnt = _add_ray(o, a, lo, hi, r, cnt, rows, start, unit, span)
-        else:
-            o = (a[0] + 0.25 * (b[0] - a[0]), a[1] + 0.25 * (b[1] - a[1]), a[2] + 0.25 * (b[2] - a[2]))
-            cnt = _add_ray(o, b, lo, hi, r, cnt, rows, start, unit, span)
+            a, b = b, a  # from 3/4 of A -> B back to A
+        o = (a[0] + 0.25 * (b[0] - a[0]), a[1] + 0.25 * (b[1] - a[1]), a[2] + 0.25 * (b[2] - a[2]))
+        cnt = _add_ray(o, b, lo, hi, r, cnt, rows, start, unit, span)
     return rows[:cnt], start[:cnt], unit[:cnt], span[:cnt]
 
 
@@ -112,10 +115,7 @@ def segment_rays(origin, target, lo, hi):
     EmbreeRayCaster._nearest (its numpy reference). Returns ``(rows, start, unit, span)`` as
     :func:`half_rays`, the rows indexing ``origin``."""
     n = origin.shape[0]
-    rows = np.empty(n, dtype=np.int64)
-    start = np.empty((n, 3), dtype=np.float32)
-    unit = np.empty((n, 3), dtype=np.float32)
-    span = np.empty(n, dtype=np.float32)
+    rows, start, unit, span = _ray_buffers(n)
     cnt = 0
     for r in range(n):
         o = (origin[r, 0], origin[r, 1], origin[r, 2])

@@ -149,14 +149,12 @@ def _windows_in_blocks(scene: "Scene", lv: ImageLevel, c: np.ndarray, d: np.ndar
     """:func:`~wavepaths.search.visibility.visibility_windows` of the image chains ``c`` of
     ``lv`` and dihedra ``d`` within their aperture windows ``[lo, hi]``, ``WINDOW_BLOCK``
     pairs at a time (each pair's march is its own: the same windows as one call)."""
+    if len(c) <= WINDOW_BLOCK:
+        return visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
     parts = []
     for s in range(0, len(c), WINDOW_BLOCK):
         cc, sl = c[s : s + WINDOW_BLOCK], slice(s, s + WINDOW_BLOCK)
         parts.append(visibility_windows(scene, lv.last[cc], d[sl], start=(lo[sl], hi[sl]), through=lv.polygons[cc, -1]))
-    if len(parts) == 1:
-        return parts[0]
-    if not parts:
-        return visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
     cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("lo", "hi", "open0", "open1")]
     return VisibilityWindows(*cat, parts[0].tau, sum(p.rays for p in parts), max(p.rounds for p in parts))
 
