@@ -17,7 +17,7 @@ from wavepaths.scene.builtin import SceneBuilder
 from wavepaths.scene.model import build_scene
 from wavepaths.search import TraceOptions, trace
 from wavepaths.search.images import build_image_levels, reflecting_polygons
-from wavepaths.search.mirror_visibility import hidden_mirrors
+from wavepaths.search.mirror_visibility import hidden_after_mirror, hidden_mirrors
 
 from ..conftest import boxes_scene
 from .helpers import path_keys
@@ -209,10 +209,13 @@ def test_image_trees_with_the_culling_hold_every_chain_that_carries_a_path(rng):
     kept_first = {tuple(r) for r in np.column_stack([cut[1].source, cut[1].polygons]).tolist()}
     assert kept_first <= first
     assert len(first) - len(kept_first) == stats["images_order_1_culled_hidden"] > 0
-    # order 2: exactly the chains whose first mirror was kept
+    # order 2: the chains whose first mirror was kept, less those whose second leg is proven
+    # blocked (hidden_after_mirror)
     second = {tuple(r) for r in np.column_stack([full[2].source, full[2].polygons]).tolist()}
     kept_second = {tuple(r) for r in np.column_stack([cut[2].source, cut[2].polygons]).tolist()}
-    assert kept_second == {c for c in second if c[:2] in kept_first}
+    after_first = {c for c in second if c[:2] in kept_first}
+    assert kept_second <= after_first
+    assert len(after_first) - len(kept_second) == stats["images_order_2_culled_hidden"] > 0
     opts = TraceOptions(max_reflections=3, diffraction=True, diffraction_reflections=2, rx_batch=4)
     on = trace(scene, tx, rx, opts)
     off = trace(scene, tx, rx, opts.with_(disable_culling={"mirror_visibility"}))
@@ -259,3 +262,70 @@ def test_the_compiled_proof_decides_every_pair_as_the_numpy_reference(size, rng)
     assert ref.sum() >= 10
     assert rays == rays_ref
     assert np.array_equal(got, ref)
+
+
+def _order_two(rng, scene, n: int = 8):
+    """The order-2 chains of ``n`` outdoor sources, without any visibility culling."""
+    src = _outdoor(rng, scene, n)
+    lv = build_image_levels(scene, src, 2)[2]
+    return lv.images[:, 1], lv.polygons[:, 0], lv.polygons[:, 1]
+
+
+def test_second_legs_proven_blocked_are_blocked_by_the_occlusion_rule(rng):
+    """Each order-2 (parent image I, previous mirror p, mirror q) called hidden: for every
+    sampled point X_q of q (its corners and 40 random points), the leg from X_p (where
+    I -> X_q crosses p's plane, wherever that is in the plane) to X_q is blocked by the
+    float64 rule."""
+    scene = _city(rng)
+    exact = NumpyRayCaster(scene)
+    I, p, q = _order_two(rng, scene)
+    hidden, rays = hidden_after_mirror(scene, I, p, q)
+    assert hidden.sum() >= 20, "almost nothing hidden: the test would prove little"
+    assert rays <= len(I) and not hidden.all()
+    n, d = scene.polygon_normal, scene.polygon_offset
+    for i in np.nonzero(hidden)[0]:
+        xq = _points_on(scene, int(q[i]), rng, 40)
+        fi = I[i] @ n[p[i]] - d[p[i]]
+        t = fi / (fi - (xq @ n[p[i]] - d[p[i]]))
+        assert ((t > 0) & (t < 1)).all()
+        xp = I[i] + t[:, None] * (xq - I[i])
+        assert exact.occluded(xp, xq).all(), i
+
+
+def test_a_second_mirror_behind_a_wall_is_hidden_from_the_image_and_not_without_the_wall():
+    """S reflects on the wall p (x = -5, facing +x) towards q (x = 20); a wall at x = 10
+    covering q's projection hides q from the image, one covering half of it does not, and the
+    wall's shadow from S itself does not matter (the leg starts on p)."""
+    def scene_with(block):
+        b = SceneBuilder()
+        b.add_quad("p", PEC, [[-5, -10, 0], [-5, 10, 0], [-5, 10, 6], [-5, -10, 6]])
+        b.add_quad("q", PEC, [[20, -3, 1], [20, 3, 1], [20, 3, 4], [20, -3, 4]])
+        if block is not None:
+            b.add_quad("Q", PEC, block)
+        return build_scene(*b.arrays())
+
+    S = np.array([0.0, 0.0, 2.0])
+    cases = {None: False,
+             ((10, -12, -1), (10, 12, -1), (10, 12, 9), (10, -12, 9)): True,
+             ((10, 0.5, -1), (10, 12, -1), (10, 12, 9), (10, 0.5, 9)): False}
+    for block, want in cases.items():
+        scene = scene_with(block)
+        names = [scene.object_names[o] for o in scene.polygon_object]
+        p, q = names.index("p"), names.index("q")
+        I = S.copy()
+        I[0] = -10.0 - S[0]  # S mirrored in x = -5
+        hidden, _ = hidden_after_mirror(scene, I[None], np.array([p]), np.array([q]))
+        assert bool(hidden[0]) is want, block
+
+
+def test_the_compiled_second_leg_proof_decides_as_the_numpy_reference(rng):
+    from wavepaths.search import kernels
+
+    if not kernels.available():
+        pytest.skip("numba (the `fast` extra) is not installed")
+    scene = _city(rng, 18)
+    I, p, q = _order_two(rng, scene, 6)
+    ref, rays_ref = hidden_after_mirror(scene, I, p, q, compiled=False)
+    got, rays = hidden_after_mirror(scene, I, p, q, compiled=True)
+    assert ref.sum() >= 20 and rays == rays_ref
+    assert np.array_equal(ref, got)

@@ -287,6 +287,9 @@ def build_image_levels(
         if k == 1 and visibility_group > 0 and len(chain):
             seen = _seen_mirrors(scene, sources, visibility_group, chain, q, mirrors, stats, compiled)
             chain, q = chain[seen], q[seen]
+        elif k >= 2 and visibility_group > 0 and len(chain):
+            seen = _seen_after_mirror(scene, k, lv, chain, q, stats, compiled)
+            chain, q = chain[seen], q[seen]
         levels.append(_extend(scene, lv, chain, q))
     return levels
 
@@ -307,6 +310,20 @@ def _seen_mirrors(scene: "Scene", sources: np.ndarray, size: int, chain: np.ndar
         stats["images_order_1_culled_hidden"] = stats.get("images_order_1_culled_hidden", 0) + int((~seen).sum())
         stats["mirror_visibility_rays"] = stats.get("mirror_visibility_rays", 0) + rays
     return seen
+
+
+def _seen_after_mirror(scene: "Scene", k: int, lv: ImageLevel, chain: np.ndarray, q: np.ndarray,
+                       stats: dict | None, compiled: bool) -> np.ndarray:
+    """(c,) bool: the order-``k`` chains (parent ``chain`` of ``lv``, mirror ``q``) whose leg
+    from the parent's last mirror to ``q`` is not proven blocked
+    (:func:`~wavepaths.search.mirror_visibility.hidden_after_mirror`)."""
+    from .mirror_visibility import hidden_after_mirror
+
+    hidden, rays = hidden_after_mirror(scene, lv.last[chain], lv.polygons[chain, -1], q, compiled)
+    if stats is not None:
+        stats[f"images_order_{k}_culled_hidden"] = stats.get(f"images_order_{k}_culled_hidden", 0) + int(hidden.sum())
+        stats["mirror_visibility_rays"] = stats.get("mirror_visibility_rays", 0) + rays
+    return ~hidden
 
 
 def _extend(scene: "Scene", lv: ImageLevel, chain: np.ndarray, q: np.ndarray) -> ImageLevel:

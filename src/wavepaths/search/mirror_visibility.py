@@ -368,3 +368,116 @@ def _behind(scene: "Scene", hulls: PolygonHulls, box: np.ndarray, P: np.ndarray,
             inside = np.einsum("kabj,kej->kabe", x, en) - eo[:, None, None, :]
             ok[idx] = (inside >= margin).all(axis=(1, 2, 3))
     return ok
+
+
+AFTER_BLOCK = 1 << 18
+"""(image, mirror) pairs of :func:`hidden_after_mirror` cast and proven at once."""
+
+
+def hidden_after_mirror(scene: "Scene", images: np.ndarray, previous: np.ndarray, mirrors: np.ndarray,
+                        compiled: bool | None = None) -> tuple[np.ndarray, int]:
+    """Which (image, mirror) pairs of an image tree's order ``k >= 2`` are proven hidden.
+
+    A chain ``... -> p -> q`` reflects on ``p`` at ``X_p`` and on ``q`` at ``X_q``; by the
+    image method, ``X_p`` is where the segment from the parent image ``I`` (the image after
+    reflecting on ``p``) to ``X_q`` crosses ``p``'s plane, and the path's leg is the part
+    ``X_p -> X_q`` of that segment. It is blocked for every ``X_q`` of ``q`` when, for a
+    convex, planar occluder ``Q`` (all by ``1e-9`` of the scene diagonal):
+
+    1. the proof of the module docstring holds with the single point ``I`` as the box: ``I``
+       strictly on one side of ``Q``'s plane, the points ``q_v`` of ``q`` strictly on the
+       other, every segment ``I -> q_v`` crossing the plane inside ``Q``'s sides; then every
+       segment ``I -> X_q`` crosses ``Q``'s plane once, at a point ``C`` inside ``Q``;
+    2. ``I`` and the points ``q_v`` lie strictly on opposite sides of ``p``'s plane, and the
+       central projections ``y_v`` of the ``q_v`` from ``I`` onto ``p``'s plane lie strictly
+       on ``I``'s side of ``Q``'s plane. ``X_p`` is the central projection of ``X_q``, so it
+       lies in the convex hull of the ``y_v`` (a central projection maps a convex hull onto
+       the hull of the images), on ``I``'s side: before ``C`` on the segment.
+
+    The leg ``X_p -> X_q`` then passes through ``Q`` with both ends off its plane: blocked
+    by the rule of :mod:`wavepaths.raycast`. No path follows the chain, nor any chain that
+    extends it. Nothing is assumed of where ``X_p`` lies in ``p`` (the back-trace's
+    in-polygon tolerance does not enter).
+
+    The candidate ``Q`` is the polygon an Embree ray meets first from just past where the
+    line from ``I`` to ``q``'s centre crosses ``p``'s plane, to that centre (a float32 hint
+    only).
+
+    Parameters
+    ----------
+    scene : Scene
+    images : (k, 3) float64
+        Parent images ``I`` [m].
+    previous : (k,) int64
+        The parent's last mirror ``p``.
+    mirrors : (k,) int64
+        The new mirror ``q``.
+    compiled : bool, optional
+        Step 1 as a compiled loop (``_numba.behind``): by default when numba is installed.
+
+    Returns
+    -------
+    hidden : (k,) bool
+    rays : int
+        Rays cast for the hints.
+    """
+    images = np.asarray(images, dtype=np.float64).reshape(-1, 3)
+    k = len(images)
+    hidden = np.zeros(k, bool)
+    hulls = scene.polygon_hulls
+    margin = 1e-9 * scene.diagonal
+    kernel = None
+    if compiled is not False and kernels.available():
+        from ._numba import behind as kernel
+    elif compiled:
+        raise ImportError("hidden_after_mirror(compiled=True) needs numba (pip install 'wavepaths[fast]')")
+    idx_all = np.nonzero(hulls.num_points[mirrors] > 0)[0]
+    rays = 0
+    n_all, d_all = scene.polygon_normal, scene.polygon_offset
+    for s in range(0, len(idx_all), AFTER_BLOCK):
+        idx = idx_all[s : s + AFTER_BLOCK]
+        I, p, q = images[idx], previous[idx], mirrors[idx]
+        # step 2 first (no ray): q's points on the far side of p's plane from I, and their
+        # central projections from I onto p's plane
+        fI = np.einsum("ij,ij->i", I, n_all[p]) - d_all[p]
+        pts = hulls.points[q]  # (b, MAX_HULL, 3)
+        real = np.arange(MAX_HULL)[None, :] < hulls.num_points[q][:, None]
+        fq = np.einsum("kaj,kj->ka", pts, n_all[p]) - d_all[p][:, None]
+        ok = (~real | (np.sign(fI)[:, None] * fq < -margin)).all(axis=1) & (fI != 0)
+        j = np.nonzero(ok)[0]
+        if len(j) == 0:
+            continue
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = fI[j][:, None] / (fI[j][:, None] - fq[j])  # in (0, 1) on real points
+        y = I[j][:, None, :] + frac[..., None] * (pts[j] - I[j][:, None, :])
+        # the hint ray, from where the line I -> centre(q) crosses p's plane, to that centre
+        c = hulls.centre[q[j]]
+        den = fI[j] - (np.einsum("ij,ij->i", c, n_all[p[j]]) - d_all[p[j]])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(den != 0, fI[j] / den, 0.0)
+        t = np.clip(t, 0.0, 1.0)
+        t += 1e-3 * (1.0 - t)  # just past p, so that Embree does not name p itself
+        start = I[j] + t[:, None] * (c - I[j])
+        tri = scene.raycaster.first_triangle(start, c)
+        rays += len(j)
+        Q = np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
+        use = (Q >= 0) & (Q != q[j]) & (Q != p[j])
+        use[use] = hulls.occluder[Q[use]]
+        Q = np.where(use, Q, 0)
+        nq, dq = n_all[Q], d_all[Q]
+        side = np.sign(np.einsum("ij,ij->i", I[j], nq) - dq)
+        fy = np.einsum("kaj,kj->ka", y, nq) - dq[:, None]
+        use &= (~real[j] | (side[:, None] * fy > margin)).all(axis=1) & (side != 0)
+        j, Q = j[use], Q[use]
+        if len(j) == 0:
+            continue
+        box = np.ascontiguousarray(I[j][:, None, :])
+        if kernel is None:
+            got = _behind(scene, hulls, box, q[j], Q, margin)
+        else:
+            got = np.empty(len(j), np.bool_)
+            kernel(box, np.ascontiguousarray(q[j], dtype=np.int64), np.ascontiguousarray(Q, dtype=np.int64),
+                   hulls.points, hulls.num_points, n_all, d_all, hulls.edge_normal, hulls.edge_offset, hulls.count,
+                   float(margin), got)
+        hidden[idx[j]] = got
+    return hidden, rays
