@@ -119,6 +119,35 @@ def test_aperture_window_holds_every_point_the_back_trace_accepts():
         assert (lo > hi).mean() > 0.5  # and most pairs are proven to carry no path
 
 
+@pytest.mark.parametrize("compiled", [False, True])
+def test_chain_aperture_windows_are_the_per_pair_windows(compiled):
+    """The windows with each chain's planes built once (the context's form), numpy and
+    compiled, against :func:`aperture_windows` pair by pair: the same interval within
+    1e-12 m, and the same empty ones (transmitter images of order 1 and 2, every diffracting
+    edge of the street canyon)."""
+    from wavepaths.search import kernels
+    from wavepaths.search.images import build_image_levels
+    from wavepaths.search.visibility import aperture_windows, chain_aperture_windows
+
+    if compiled and not kernels.available():
+        pytest.skip("numba (the `fast` extra) is not installed")
+    scene = load_scene("street_canyon")
+    d_all = np.nonzero(scene.dihedra.diffracting)[0]
+    levels = build_image_levels(scene, np.array([[-60.0, 0.0, 10.0], [20.0, -5.0, 1.5]]), 2, True)
+    for lv in levels[1:]:
+        c = np.repeat(np.arange(len(lv)), len(d_all))
+        d = np.tile(d_all, len(lv))
+        o = np.random.default_rng(1).permutation(len(c))  # chains in any order, repeated
+        c, d = c[o], d[o]
+        ref_lo, ref_hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
+        lo, hi = chain_aperture_windows(scene, lv.last, lv.polygons[:, -1], c, d, compiled=compiled)
+        empty = ref_lo > ref_hi
+        assert np.array_equal(empty, lo > hi)
+        assert 0.2 < empty.mean() < 1.0
+        assert np.allclose(lo[~empty], ref_lo[~empty], rtol=0, atol=1e-12)
+        assert np.allclose(hi[~empty], ref_hi[~empty], rtol=0, atol=1e-12)
+
+
 def _order_1_pairs_with_apertures(scene, tx):
     """The transmitters' order-1 images and every (image, diffracting edge) pair with a
     non-empty aperture window: ``(level, chain, dihedron, lo, hi)``."""
@@ -184,3 +213,56 @@ def test_image_windows_in_blocks_equal_one_call(monkeypatch):
     for f in ("lo", "hi", "open0", "open1"):
         assert np.array_equal(getattr(got, f), getattr(one, f)), f
     assert got.rays == one.rays and got.tau == one.tau
+
+
+def test_compiled_shadow_intervals_are_the_numpy_ones(rng):
+    """Both modes of :func:`shadow_intervals`, compiled pair by pair, against numpy on
+    random (source, triangle, edge) triples of a city: the same empty intervals, the same
+    ends within 1e-9 m (ulps of the recentred coordinates), on a sample where many are
+    non-empty."""
+    from wavepaths.search import kernels
+    from wavepaths.search.visibility import both_shadow_intervals
+
+    from .test_mirror_visibility import _city, _outdoor
+
+    if not kernels.available():
+        pytest.skip("numba (the `fast` extra) is not installed")
+    scene = _city(rng)
+    exact = scene.raycaster.exact
+    dh = scene.dihedra
+    k = 20000
+    S = _outdoor(rng, scene, 40, z=rng.uniform(1, 30))[rng.integers(0, 40, k)] - exact.center
+    tri = rng.integers(0, len(exact.corners), k)
+    d = rng.integers(0, len(dh.length), k)
+    args = (exact, S, tri, dh.origin[d] - exact.center, dh.direction[d], dh.length[d].astype(float))
+    ref = both_shadow_intervals(*args, compiled=False)
+    got = both_shadow_intervals(*args, compiled=True)
+    for r, g in zip(ref, got):
+        empty = ~np.isfinite(r)
+        assert np.array_equal(empty, ~np.isfinite(g))
+        assert np.allclose(g[~empty], r[~empty], rtol=0, atol=1e-9)
+    assert (ref[0] <= ref[1]).sum() > 200  # proven shadows among them
+
+
+@pytest.mark.parametrize("through", [False, True])
+def test_compiled_windows_are_the_numpy_windows(through):
+    """The visibility windows with the compiled shadow intervals against numpy's, from a
+    transmitter (order 0) and from its order-1 images (``through``): the same hidden pairs,
+    the same ends within 1e-9 m."""
+    from wavepaths.search import kernels
+    from wavepaths.search.images import build_image_levels
+
+    if not kernels.available():
+        pytest.skip("numba (the `fast` extra) is not installed")
+    scene = load_scene("street_canyon")
+    d_all = np.nonzero(scene.dihedra.diffracting)[0]
+    lv = build_image_levels(scene, np.array([[-60.0, 0.0, 10.0]]), 1, True)[1 if through else 0]
+    c = np.repeat(np.arange(len(lv)), len(d_all))
+    d = np.tile(d_all, len(lv))
+    kw = {"through": lv.polygons[c, -1]} if through else {}
+    ref = visibility_windows(scene, lv.last[c], d, compiled=False, **kw)
+    got = visibility_windows(scene, lv.last[c], d, compiled=True, **kw)
+    assert np.array_equal(ref.hidden, got.hidden) and ref.hidden.sum() > 5
+    assert np.array_equal(ref.open0, got.open0) and np.array_equal(ref.open1, got.open1)
+    assert np.allclose(got.lo, ref.lo, rtol=0, atol=1e-9) and np.allclose(got.hi, ref.hi, rtol=0, atol=1e-9)
+    assert ref.rays == got.rays

@@ -33,7 +33,7 @@ from .apertures import Apertures, scene_apertures
 from .beams import LazyChainBeams, chains_meeting_edges, edge_tree
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
-from .visibility import VisibilityWindows, aperture_windows, visibility_windows
+from .visibility import VisibilityWindows, chain_aperture_windows, visibility_windows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -138,6 +138,32 @@ def _source_pairs(
     yield from chains_meeting_edges(scene, lv, apertures, edges, compiled=compiled)
 
 
+def _diffracting_side(scene: "Scene", sectors: SectorTable, lv: ImageLevel, c: np.ndarray, d: np.ndarray,
+                      compiled: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The (image chain ``c``, dihedron ``d``) pairs whose image lies in a sector of the edge
+    wider than pi, off its faces (:func:`~wavepaths.topology.sectors.sector_of`): their rows
+    (k,) int64 and sectors (k,) int64. With the compiled kernels, pair by pair in
+    :func:`wavepaths.search._numba.end_sides` (the same expressions)."""
+    from . import kernels
+    from ..topology.sectors import FACE_ANGLE_TOL
+
+    min_width = np.pi + scene.tolerances.coplanar_angle
+    if compiled and kernels.available():
+        from . import _numba
+
+        k = len(c)
+        keep, sec, f = np.empty(k, np.int64), np.empty(k, np.int64), np.empty(k)
+        a = np.ascontiguousarray
+        n = _numba.end_sides(a(lv.images), a(c, dtype=np.int64), a(d, dtype=np.int64), a(scene.dihedra.origin),
+                             a(scene.dihedra.direction), a(sectors.x_hat), a(sectors.y_hat), a(sectors.angles),
+                             a(sectors.count, dtype=np.int64), a(sectors.width), FACE_ANGLE_TOL, min_width,
+                             keep, sec, f, f.copy(), f.copy())
+        return keep[:n], sec[:n]
+    sec, width = sector_of(sectors, d, lv.last[c], scene.dihedra.origin[d])
+    keep = np.nonzero((sec >= 0) & (width > min_width))[0]
+    return keep, sec[keep]
+
+
 WINDOW_BLOCK = 1 << 19
 """(image, edge) pairs per call of the images' visibility windows: the march holds some
 thirty arrays per pair, and munich's order-2 sources (tens of millions of pairs) at once
@@ -145,16 +171,17 @@ took over 24 GB."""
 
 
 def _windows_in_blocks(scene: "Scene", lv: ImageLevel, c: np.ndarray, d: np.ndarray, lo: np.ndarray,
-                       hi: np.ndarray) -> VisibilityWindows:
+                       hi: np.ndarray, compiled: bool | None = None) -> VisibilityWindows:
     """:func:`~wavepaths.search.visibility.visibility_windows` of the image chains ``c`` of
     ``lv`` and dihedra ``d`` within their aperture windows ``[lo, hi]``, ``WINDOW_BLOCK``
     pairs at a time (each pair's march is its own: the same windows as one call)."""
     if len(c) <= WINDOW_BLOCK:
-        return visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1])
+        return visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=lv.polygons[c, -1], compiled=compiled)
     parts = []
     for s in range(0, len(c), WINDOW_BLOCK):
         cc, sl = c[s : s + WINDOW_BLOCK], slice(s, s + WINDOW_BLOCK)
-        parts.append(visibility_windows(scene, lv.last[cc], d[sl], start=(lo[sl], hi[sl]), through=lv.polygons[cc, -1]))
+        parts.append(visibility_windows(scene, lv.last[cc], d[sl], start=(lo[sl], hi[sl]), through=lv.polygons[cc, -1],
+                                        compiled=compiled))
     cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("lo", "hi", "open0", "open1")]
     return VisibilityWindows(*cat, parts[0].tau, sum(p.rays for p in parts), max(p.rounds for p in parts))
 
@@ -195,17 +222,18 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             cull = "source_beam" not in options.disable_culling
             windows = a >= 1 and "aperture_window" not in options.disable_culling
             culled_aperture = 0
+            last_mirror = lv.polygons[:, -1] if windows else None
             # block by block, each block's survivors of every test kept before the next block:
             # the pairs that meet the beams can outnumber the survivors by far (munich, order 2:
             # 68.7 M pairs would not fit in memory at once)
             for c, d in _source_pairs(scene, lv, diffracting, edges, apertures, cull, options.compiled):
                 tested += len(c)
-                sec, width = sector_of(sectors, d, lv.last[c], dihedra.origin[d])
-                keep = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
-                c, d, sec = c[keep], d[keep], sec[keep]
+                keep, sec = _diffracting_side(scene, sectors, lv, c, d, options.compiled)
+                c, d = c[keep], d[keep]
                 if windows:
                     # the incident leg leaves the last mirror: only where it can cross that mirror
-                    lo, hi = aperture_windows(scene, lv.last[c], lv.polygons[c, -1], d)
+                    lo, hi = chain_aperture_windows(scene, lv.last, last_mirror, c, d,
+                                                    None if options.compiled else False)
                     reach = lo <= hi
                     culled_aperture += int((~reach).sum())
                     c, d, sec = c[reach], d[reach], sec[reach]
@@ -220,7 +248,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             vis = None
             if a == 0 and "source_visibility" not in options.disable_culling:
                 # the transmitters see part of each edge: pairs hidden along the whole edge go
-                vis = visibility_windows(scene, lv.last[c], d)
+                vis = visibility_windows(scene, lv.last[c], d, compiled=None if options.compiled else False)
                 seen = ~vis.hidden
                 stats["diffraction_sources_order_0_culled_hidden"] = int((~seen).sum())
                 stats["visibility_rays"] = vis.rays
@@ -234,7 +262,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
                 else:
                     # the leg from the last mirror to the edge: the part of each aperture window
                     # not proven hidden beyond the mirror; pairs hidden along all of it go
-                    vis = _windows_in_blocks(scene, lv, c, d, lo, hi)
+                    vis = _windows_in_blocks(scene, lv, c, d, lo, hi, None if options.compiled else False)
                     seen = ~vis.hidden
                     stats[f"diffraction_sources_order_{a}_culled_hidden"] = int((~seen).sum())
                     stats["visibility_rays"] = stats.get("visibility_rays", 0) + vis.rays

@@ -16,10 +16,13 @@ margins and an early exit:
 * :func:`chains_meeting_edges`: (image chains x edge tree)
   (:func:`wavepaths.search.beams.chains_meeting_edges`).
 
-Six more compiled loops, called from their modules with the numpy reference beside them:
+More compiled loops, called from their modules with the numpy reference beside them:
 the image trees' exact tests (``_numba.admissible``, :mod:`wavepaths.search.images`), the
 receiver side's frame and sector lookup (``_numba.end_sides``,
-:mod:`wavepaths.search.end_sides`), the join of the two sides with the closed-form
+:mod:`wavepaths.search.end_sides`; also the sector of the transmitter's (image, edge) pairs,
+:mod:`wavepaths.search.context`), the images' aperture windows and the shadow intervals of
+the visibility windows (:mod:`wavepaths.search._numba_windows`,
+:mod:`wavepaths.search.visibility`), the join of the two sides with the closed-form
 point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`), the Keller-cone
 culling of the sources per chunk of receivers (``_numba.keller_cone_keep``, same module),
 the back-traces of the image method (``_numba.backtrace``, :mod:`wavepaths.search.images`)

@@ -215,9 +215,28 @@ edge) shadows nothing.
     return np.where(valid, lo, np.inf), np.where(valid, hi, -np.inf)
 
 
+def both_shadow_intervals(exact: "ExactSegments", S: np.ndarray, tri: np.ndarray, A: np.ndarray, w: np.ndarray,
+                          L: np.ndarray, compiled: bool = False) -> tuple[np.ndarray, ...]:
+    """:func:`shadow_intervals` in both modes: ``(proven lo, proven hi, nominal lo, nominal hi)``.
+
+    ``compiled``: pair by pair in :func:`wavepaths.search._numba_windows.shadow_intervals`
+    (the numpy function is its reference), without the (k, 4) temporaries of each mode.
+    """
+    if not compiled:
+        return (*shadow_intervals(exact, S, tri, A, w, L), *shadow_intervals(exact, S, tri, A, w, L, mode="nominal"))
+    from ._numba_windows import shadow_intervals as kernel
+
+    k = len(tri)
+    out = [np.empty(k) for _ in range(4)]
+    c = np.ascontiguousarray
+    kernel(exact.corners, exact.normal, exact.offset, exact.tol, float(exact.edge_tol), c(S, dtype=np.float64),
+           c(tri, dtype=np.int64), c(A, dtype=np.float64), c(w, dtype=np.float64), c(L, dtype=np.float64), *out)
+    return tuple(out)
+
+
 def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds: int = MAX_ROUNDS,
                        start: tuple[np.ndarray, np.ndarray] | None = None,
-                       through: np.ndarray | None = None) -> VisibilityWindows:
+                       through: np.ndarray | None = None, compiled: bool | None = None) -> VisibilityWindows:
     """The part of edge ``d[i]`` not proven hidden from the point ``S[i]`` (see the module docstring).
 
     Parameters
@@ -241,6 +260,9 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         all of it lies beyond the mirror's plane and the leg's start is proven off the
         face's plane. The ends are decided by the occlusion rule on the leg from the
         mirror's plane (an end whose segment from ``S`` does not cross it is kept open).
+    compiled : bool, optional
+        The shadow intervals pair by pair (:func:`both_shadow_intervals`): by default when
+        numba is installed; ``False`` runs the numpy reference.
 
     Returns
     -------
@@ -257,6 +279,9 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
     else:
         lo, hi = np.array(start[0], dtype=np.float64), np.array(start[1], dtype=np.float64)
     caster = scene.raycaster
+    from . import kernels
+
+    use_kernel = compiled is not False and kernels.available()
     first = getattr(caster, "first_triangle", None)
     exact = getattr(caster, "exact", None)
     tau = scene.length_tolerance(1e-9)
@@ -297,8 +322,7 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         if hit.any():
             h = np.nonzero(hit)[0]
             args = (exact, Sr[idx[h]], tri[h], A[idx[h]], w[idx[h]], L[idx[h]])
-            s_lo[h], s_hi[h] = shadow_intervals(*args)
-            n_lo[h], n_hi[h] = shadow_intervals(*args, mode="nominal")
+            s_lo[h], s_hi[h], n_lo[h], n_hi[h] = both_shadow_intervals(*args, compiled=use_kernel)
         nl = len(il)
         # left end: the face's nominal shadow reaches back to it (within tau), its proven
         # shadow beyond the probe; the end moves to the far side of the proven shadow
@@ -433,14 +457,26 @@ def aperture_planes(scene: "Scene", I: np.ndarray, q: np.ndarray) -> AperturePla
     return AperturePlanes(ptr, N, O, np.where(valid, eps, 0.0), valid, whole, I - c0, c0)
 
 
-def windows_through(scene: "Scene", planes: AperturePlanes, image: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def windows_through(scene: "Scene", planes: AperturePlanes, image: np.ndarray, d: np.ndarray,
+                    compiled: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Per (image row ``image[i]`` of ``planes``, dihedron ``d[i]``), the aperture window on the edge.
 
     Returns ``lo, hi`` (k,): the hull over the mirror's triangles of the ``t`` in
     ``[0, L]`` satisfying their four half-spaces, widened by ``1e-9`` of the scene diagonal;
-    ``lo > hi`` when empty (see :func:`aperture_windows`).
+    ``lo > hi`` when empty (see :func:`aperture_windows`). ``compiled``: pair by pair in
+    :func:`wavepaths.search._numba_windows.windows_through` (this code is its reference).
     """
     dihedra = scene.dihedra
+    if compiled:
+        from ._numba_windows import windows_through as kernel
+
+        k = len(d)
+        lo, hi = np.empty(k), np.empty(k)
+        c = np.ascontiguousarray
+        kernel(planes.ptr, planes.N, planes.O, planes.eps, planes.valid, planes.whole, c(planes.I),
+               c(planes.center, dtype=np.float64), c(image, dtype=np.int64), c(d, dtype=np.int64), dihedra.origin,
+               dihedra.direction, dihedra.length.astype(np.float64), float(scene.length_tolerance(1e-9)), lo, hi)
+        return lo, hi
     L = dihedra.length[d].astype(np.float64)
     k = len(d)
     lo, hi = np.zeros(k), L.copy()
@@ -474,6 +510,26 @@ def windows_through(scene: "Scene", planes: AperturePlanes, image: np.ndarray, d
     lo[sel] = np.maximum(w_lo[sel] - tau, 0.0)
     hi[sel] = np.minimum(w_hi[sel] + tau, L[sel])
     return lo, hi
+
+
+def chain_aperture_windows(scene: "Scene", images: np.ndarray, mirrors: np.ndarray, chain: np.ndarray, d: np.ndarray,
+                           compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`aperture_windows` of pairs (chain ``chain[i]``, dihedron ``d[i]``), for chains
+    with last images ``images`` (n, 3) and last mirrors ``mirrors`` (n,): the same windows,
+    with each chain's :class:`AperturePlanes` built once for all its pairs (not once per
+    pair), then the windows pair by pair, compiled when numba is installed (``compiled``:
+    ``None`` by default, ``False`` the numpy reference)."""
+    from . import kernels
+
+    chain = np.asarray(chain, dtype=np.int64)
+    d = np.asarray(d, dtype=np.int64)
+    u, inv = np.unique(chain, return_inverse=True)
+    planes = aperture_planes(scene, np.asarray(images, dtype=np.float64)[u], np.asarray(mirrors, dtype=np.int64)[u])
+    if planes is None:
+        L = scene.dihedra.length[d].astype(np.float64)
+        return np.zeros(len(d)), L.copy()
+    use = compiled is not False and kernels.available()
+    return windows_through(scene, planes, inv.astype(np.int64), d, compiled=use)
 
 
 def aperture_windows(scene: "Scene", I: np.ndarray, q: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
