@@ -599,6 +599,57 @@ def behind(box, P, Q, points, num_points, normal, offset, edge_normal, edge_offs
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def behind_after(I, P, Qm, O, occluder, points, num_points, normal, offset, edge_normal, edge_offset, count, margin,
+                 out):
+    # mirror_visibility.hidden_after_mirror's proof (numpy reference there), pair by pair: the
+    # parent image I[i], its last mirror P[i], the new mirror Qm[i], the candidate occluder O[i]
+    for i in range(len(P)):
+        p, q, o = P[i], Qm[i], O[i]
+        out[i] = False
+        if o < 0 or o == q or o == p or not occluder[o] or num_points[q] == 0:
+            continue
+        i0, i1, i2 = I[i, 0], I[i, 1], I[i, 2]
+        fI = i0 * normal[p, 0] + i1 * normal[p, 1] + i2 * normal[p, 2] - offset[p]
+        n0, n1, n2, d = normal[o, 0], normal[o, 1], normal[o, 2], offset[o]
+        sI = i0 * n0 + i1 * n1 + i2 * n2 - d
+        if fI == 0 or sI == 0:
+            continue
+        sp = 1.0 if fI > 0 else -1.0
+        side = 1.0 if sI > 0 else -1.0
+        ok = side * sI > margin
+        a = num_points[q]
+        e = count[o]
+        v = 0
+        while ok and v < a:
+            x0, x1, x2 = points[q, v, 0], points[q, v, 1], points[q, v, 2]
+            # step 2: q's point beyond p's plane from I, its projection onto p's plane on I's side
+            fq = x0 * normal[p, 0] + x1 * normal[p, 1] + x2 * normal[p, 2] - offset[p]
+            if not sp * fq < -margin:
+                ok = False
+                break
+            frac = fI / (fI - fq)
+            y0, y1, y2 = i0 + frac * (x0 - i0), i1 + frac * (x1 - i1), i2 + frac * (x2 - i2)
+            if not side * (y0 * n0 + y1 * n1 + y2 * n2 - d) > margin:
+                ok = False
+                break
+            # step 1: q's point beyond the occluder's plane, the segment from I crossing it inside
+            sv = x0 * n0 + x1 * n1 + x2 * n2 - d
+            if not side * sv < -margin:
+                ok = False
+                break
+            t = sI / (sI - sv)
+            c0, c1, c2 = i0 + t * (x0 - i0), i1 + t * (x1 - i1), i2 + t * (x2 - i2)
+            for f in range(e):
+                if not (c0 * edge_normal[o, f, 0] + c1 * edge_normal[o, f, 1] + c2 * edge_normal[o, f, 2])\
+                        - edge_offset[o, f] >= margin:
+                    ok = False
+                    break
+            v += 1
+        out[i] = ok
+    return out
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _sphere_reach(x0, x1, x2, w0, w1, w2, c, r):
     # diffraction.keller_cone_keep's angle_range at one edge end X: the angle theta between

@@ -417,7 +417,8 @@ def hidden_after_mirror(scene: "Scene", images: np.ndarray, previous: np.ndarray
     mirrors : (k,) int64
         The new mirror ``q``.
     compiled : bool, optional
-        Step 1 as a compiled loop (``_numba.behind``): by default when numba is installed.
+        The proof as a compiled loop (``_numba.behind_after``): by default when numba is
+        installed; ``False`` runs the numpy reference (:func:`_after_mirror_numpy`).
 
     Returns
     -------
@@ -432,7 +433,7 @@ def hidden_after_mirror(scene: "Scene", images: np.ndarray, previous: np.ndarray
     margin = 1e-9 * scene.diagonal
     kernel = None
     if compiled is not False and kernels.available():
-        from ._numba import behind as kernel
+        from ._numba import behind_after as kernel
     elif compiled:
         raise ImportError("hidden_after_mirror(compiled=True) needs numba (pip install 'wavepaths[fast]')")
     idx_all = np.nonzero(hulls.num_points[mirrors] > 0)[0]
@@ -441,47 +442,56 @@ def hidden_after_mirror(scene: "Scene", images: np.ndarray, previous: np.ndarray
     for s in range(0, len(idx_all), AFTER_BLOCK):
         idx = idx_all[s : s + AFTER_BLOCK]
         I, p, q = images[idx], previous[idx], mirrors[idx]
-        # step 2 first (no ray): q's points on the far side of p's plane from I, and their
-        # central projections from I onto p's plane
         fI = np.einsum("ij,ij->i", I, n_all[p]) - d_all[p]
-        pts = hulls.points[q]  # (b, MAX_HULL, 3)
-        real = np.arange(MAX_HULL)[None, :] < hulls.num_points[q][:, None]
-        fq = np.einsum("kaj,kj->ka", pts, n_all[p]) - d_all[p][:, None]
-        ok = (~real | (np.sign(fI)[:, None] * fq < -margin)).all(axis=1) & (fI != 0)
-        j = np.nonzero(ok)[0]
-        if len(j) == 0:
-            continue
+        # the hint ray, from just past where the line I -> centre(q) crosses p's plane, to that centre
+        c = hulls.centre[q]
+        den = fI - (np.einsum("ij,ij->i", c, n_all[p]) - d_all[p])
         with np.errstate(divide="ignore", invalid="ignore"):
-            frac = fI[j][:, None] / (fI[j][:, None] - fq[j])  # in (0, 1) on real points
-        y = I[j][:, None, :] + frac[..., None] * (pts[j] - I[j][:, None, :])
-        # the hint ray, from where the line I -> centre(q) crosses p's plane, to that centre
-        c = hulls.centre[q[j]]
-        den = fI[j] - (np.einsum("ij,ij->i", c, n_all[p[j]]) - d_all[p[j]])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(den != 0, fI[j] / den, 0.0)
+            t = np.where(den != 0, fI / den, 0.0)
         t = np.clip(t, 0.0, 1.0)
         t += 1e-3 * (1.0 - t)  # just past p, so that Embree does not name p itself
-        start = I[j] + t[:, None] * (c - I[j])
-        tri = scene.raycaster.first_triangle(start, c)
-        rays += len(j)
+        tri = scene.raycaster.first_triangle(I + t[:, None] * (c - I), c)
+        rays += len(idx)
         Q = np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
-        use = (Q >= 0) & (Q != q[j]) & (Q != p[j])
-        use[use] = hulls.occluder[Q[use]]
-        Q = np.where(use, Q, 0)
-        nq, dq = n_all[Q], d_all[Q]
-        side = np.sign(np.einsum("ij,ij->i", I[j], nq) - dq)
-        fy = np.einsum("kaj,kj->ka", y, nq) - dq[:, None]
-        use &= (~real[j] | (side[:, None] * fy > margin)).all(axis=1) & (side != 0)
-        j, Q = j[use], Q[use]
-        if len(j) == 0:
+        if kernel is not None:
+            got = np.empty(len(idx), np.bool_)
+            kernel(np.ascontiguousarray(I), np.ascontiguousarray(p, dtype=np.int64),
+                   np.ascontiguousarray(q, dtype=np.int64), Q.astype(np.int64), hulls.occluder, hulls.points,
+                   hulls.num_points, n_all, d_all, hulls.edge_normal, hulls.edge_offset, hulls.count, float(margin), got)
+            hidden[idx] = got
             continue
-        box = np.ascontiguousarray(I[j][:, None, :])
-        if kernel is None:
-            got = _behind(scene, hulls, box, q[j], Q, margin)
-        else:
-            got = np.empty(len(j), np.bool_)
-            kernel(box, np.ascontiguousarray(q[j], dtype=np.int64), np.ascontiguousarray(Q, dtype=np.int64),
-                   hulls.points, hulls.num_points, n_all, d_all, hulls.edge_normal, hulls.edge_offset, hulls.count,
-                   float(margin), got)
-        hidden[idx[j]] = got
+        hidden[idx] = _after_mirror_numpy(scene, hulls, I, p, q, Q, fI, margin)
     return hidden, rays
+
+
+def _after_mirror_numpy(scene: "Scene", hulls: PolygonHulls, I: np.ndarray, p: np.ndarray, q: np.ndarray,
+                        Q: np.ndarray, fI: np.ndarray, margin: float) -> np.ndarray:
+    """(k,) bool: the proof of :func:`hidden_after_mirror` for parent images ``I``, previous
+    mirrors ``p``, mirrors ``q``, candidate occluders ``Q`` (-1: none) and ``fI``, the images'
+    signed distances to ``p``'s plane; the numpy reference of ``_numba.behind_after``."""
+    n_all, d_all = scene.polygon_normal, scene.polygon_offset
+    out = np.zeros(len(I), bool)
+    use = (Q >= 0) & (Q != q) & (Q != p) & (fI != 0)
+    use[use] = hulls.occluder[Q[use]]
+    j = np.nonzero(use)[0]
+    if len(j) == 0:
+        return out
+    I, p, q, Q, fI = I[j], p[j], q[j], Q[j], fI[j]
+    # step 2: q's points on the far side of p's plane from I, and their central projections
+    # from I onto p's plane on I's side of Q's plane
+    pts = hulls.points[q]  # (b, MAX_HULL, 3)
+    real = np.arange(MAX_HULL)[None, :] < hulls.num_points[q][:, None]
+    fq = np.einsum("kaj,kj->ka", pts, n_all[p]) - d_all[p][:, None]
+    ok = (~real | (np.sign(fI)[:, None] * fq < -margin)).all(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = fI[:, None] / (fI[:, None] - fq)  # in (0, 1) on the real points that passed
+    y = I[:, None, :] + frac[..., None] * (pts - I[:, None, :])
+    nq, dq = n_all[Q], d_all[Q]
+    side = np.sign(np.einsum("ij,ij->i", I, nq) - dq)
+    fy = np.einsum("kaj,kj->ka", y, nq) - dq[:, None]
+    ok &= (~real | (side[:, None] * fy > margin)).all(axis=1) & (side != 0)
+    k = np.nonzero(ok)[0]
+    if len(k):
+        # step 1: the module's proof with the single point I as the box
+        out[j[k]] = _behind(scene, hulls, np.ascontiguousarray(I[k][:, None, :]), q[k], Q[k], margin)
+    return out
