@@ -31,6 +31,11 @@ if TYPE_CHECKING:  # pragma: no cover
 # many dihedra, tree queries above: dense was 2.6x faster with 640 (etoile_crop, R3+D2) and
 # 1.5x with ~100 (simple_street_canyon map, R2+D1); the tree's cost grows as log(dihedra)
 DENSE_RECEIVER_SIDE_MAX_DIHEDRA = 4096
+COMPILED_PAIR_BUDGET = 1 << 23
+"""(receiver image, dihedron) pairs per chunk of :func:`diffraction_tile` with the compiled
+receiver side (one int32 each, 32 MB): each chunk pays a fixed cost (the Keller-cone culling
+of every source, the gathers of the kept ones), larger chunks cull less. On munich's R2+D2
+strip, 2^21 pairs per chunk took 52 s, 2^23 39 s, 2^25 43 s (the same 120 paths)."""
 
 
 @dataclass(frozen=True)
@@ -315,8 +320,8 @@ def diffraction_tile(
     m = int(ctx.sectors.angles.shape[1])
     # receiver images per chunk: the numpy receiver side holds about m + 4 (images x dihedra)
     # temporaries, the compiled one a single int32 array of the survivors' columns
-    per_pair = 1 if compiled else m + 4
-    step = max(1, CANDIDATE_BUDGET // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
+    per_pair, budget = (1, COMPILED_PAIR_BUDGET) if compiled else (m + 4, CANDIDATE_BUDGET)
+    step = max(1, budget // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
     # receiver images in chunks of consecutive rows: in Morton order (:func:`spatial_order`),
     # each chunk is compact in space, and the Keller-cone culling below keeps fewer dihedra
     # for it (etoile_crop at depth 3: 608 M -> 327 M pairs at b = 2)
