@@ -329,3 +329,32 @@ def test_the_compiled_second_leg_proof_decides_as_the_numpy_reference(rng):
     got, rays = hidden_after_mirror(scene, I, p, q, compiled=True)
     assert ref.sum() >= 20 and rays == rays_ref
     assert np.array_equal(ref, got)
+
+
+@pytest.mark.parametrize("q_z, want", [((10.0, 14.0), True), ((0.5, 4.0), False)])
+def test_a_second_leg_starting_beyond_the_occluder_is_not_culled(q_z, want, rng):
+    """S reflects on the ground (p) towards a wall q at x = 20 behind a wall Q at x = 10.
+    Every segment from the image I (below the ground) to q crosses Q, but for a low q the
+    legs start on the ground beyond Q (x up to 16) and reach q unblocked: only the high q,
+    whose legs start before Q, may be culled. The float64 caster agrees on sampled legs."""
+    b = SceneBuilder()
+    b.add_quad("p", PEC, [[-30, -30, 0], [30, -30, 0], [30, 30, 0], [-30, 30, 0]])
+    z0, z1 = q_z
+    b.add_quad("q", PEC, [[20, -3, z0], [20, 3, z0], [20, 3, z1], [20, -3, z1]])
+    b.add_quad("Q", PEC, [[10, -12, -5], [10, 12, -5], [10, 12, 30], [10, -12, 30]])
+    scene = build_scene(*b.arrays())
+    names = [scene.object_names[o] for o in scene.polygon_object]
+    p, q = names.index("p"), names.index("q")
+    I = np.array([[0.0, 0.0, -2.0]])  # S = (0, 0, 2) mirrored in the ground
+    for compiled in (False, True):
+        from wavepaths.search import kernels
+
+        if compiled and not kernels.available():
+            continue
+        hidden, _ = hidden_after_mirror(scene, I, np.array([p]), np.array([q]), compiled=compiled)
+        assert bool(hidden[0]) is want
+    xq = _points_on(scene, q, rng, 40)
+    t = 2.0 / (xq[:, 2] + 2.0)  # where I -> X_q meets the ground
+    xp = I + t[:, None] * (xq - I)
+    blocked = NumpyRayCaster(scene).occluded(xp, xq)
+    assert blocked.all() if want else not blocked.all()

@@ -7,6 +7,16 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _half_line(alpha, beta, lo, hi):
+    # the t with alpha + beta t >= 0 intersected with [lo, hi]; bad: no t at all (beta = 0)
+    if beta > 0:
+        return max(lo, -alpha / beta), hi, False
+    if beta < 0:
+        return lo, min(hi, -alpha / beta), False
+    return lo, hi, alpha < 0
+
+
 @numba.njit(cache=True, nogil=True)
 def windows_through(ptr, N, O, eps, valid, whole, I, center, image, d, origin, direction, length, tau, lo, hi):
     # visibility.windows_through (numpy reference), pair by pair: for pair i (image row
@@ -36,12 +46,8 @@ def windows_through(ptr, N, O, eps, valid, whole, I, center, image, d, origin, d
                 if k > 0:
                     alpha -= eps[r] * D
                 beta = N[r, k, 0] * w0 + N[r, k, 1] * w1 + N[r, k, 2] * w2
-                if beta > 0:
-                    t_lo = max(t_lo, -alpha / beta)
-                elif beta < 0:
-                    t_hi = min(t_hi, -alpha / beta)
-                elif alpha < 0:
-                    bad = True
+                t_lo, t_hi, none = _half_line(alpha, beta, t_lo, t_hi)
+                bad |= none
             if bad:
                 continue
             w_lo = min(w_lo, t_lo)
@@ -73,14 +79,7 @@ def shadow_intervals(corners, normal, offset, tol, edge_tol, S, tri, A, w, L, s_
         # the plane's half-line, shared by both modes
         alpha0 = -sigma * (n0 * a0 + n1 * a1 + n2 * a2 - off) - 2 * tl
         beta0 = -sigma * (n0 * w0 + n1 * w1 + n2 * w2)
-        p_lo, p_hi, q_lo, q_hi = 0.0, Li, 0.0, Li
-        bad_p = bad_q = False
-        if beta0 > 0:
-            p_lo = max(p_lo, -alpha0 / beta0)
-        elif beta0 < 0:
-            p_hi = min(p_hi, -alpha0 / beta0)
-        elif alpha0 < 0:
-            bad_p = True
+        p_lo, p_hi, bad_p = _half_line(alpha0, beta0, 0.0, Li)
         q_lo, q_hi, bad_q = p_lo, p_hi, bad_p
         for s in range(3):
             u, v, z = s, (s + 1) % 3, (s + 2) % 3
@@ -98,19 +97,10 @@ def shadow_intervals(corners, normal, offset, tol, edge_tol, S, tri, A, w, L, s_
             m0, m1, m2 = orient * m0, orient * m1, orient * m2
             base = m0 * (a0 - x0) + m1 * (a1 - x1) + m2 * (a2 - x2)
             beta = m0 * w0 + m1 * w1 + m2 * w2
-            ap = base - eps * dmax
-            aq = base  # nominal: no margin inside the sides
-            if beta > 0:
-                p_lo = max(p_lo, -ap / beta)
-                q_lo = max(q_lo, -aq / beta)
-            elif beta < 0:
-                p_hi = min(p_hi, -ap / beta)
-                q_hi = min(q_hi, -aq / beta)
-            else:
-                if ap < 0:
-                    bad_p = True
-                if aq < 0:
-                    bad_q = True
+            p_lo, p_hi, none_p = _half_line(base - eps * dmax, beta, p_lo, p_hi)
+            q_lo, q_hi, none_q = _half_line(base, beta, q_lo, q_hi)  # nominal: no margin inside the sides
+            bad_p |= none_p
+            bad_q |= none_q
         ok_p = valid and not bad_p and math.isfinite(p_lo) and math.isfinite(p_hi)
         ok_q = valid and not bad_q and math.isfinite(q_lo) and math.isfinite(q_hi)
         s_lo[i] = p_lo if ok_p else np.inf

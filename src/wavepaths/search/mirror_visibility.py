@@ -215,6 +215,19 @@ def polygon_hulls(scene: "Scene") -> PolygonHulls:
     return PolygonHulls(corners, count, edge_normal, edge_offset, centre, points, num_points, occluder)
 
 
+def _kernel(name: str, compiled: bool | None, caller: str):
+    """The compiled proof ``_numba.<name>``, or ``None`` for the numpy reference: by default
+    when numba is installed, never with ``compiled=False``; ``compiled=True`` without numba
+    raises ``ImportError``."""
+    if compiled is not False and kernels.available():
+        from . import _numba
+
+        return getattr(_numba, name)
+    if compiled:
+        raise ImportError(f"{caller}(compiled=True) needs numba (pip install 'wavepaths[fast]')")
+    return None
+
+
 def source_groups(sources: np.ndarray, size: int = GROUP_SIZE) -> np.ndarray:
     """(s,) int64: a group per source, ``size`` consecutive sources along a Morton curve each."""
     from .spheres import morton_order
@@ -277,11 +290,7 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     centre = 0.5 * (lo + hi)
     hulls = scene.polygon_hulls
     margin = 1e-9 * scene.diagonal
-    kernel = None
-    if compiled is not False and kernels.available():
-        from ._numba import behind as kernel
-    elif compiled:
-        raise ImportError("hidden_mirrors(compiled=True) needs numba (pip install 'wavepaths[fast]')")
+    kernel = _kernel("behind", compiled, "hidden_mirrors")
     gi, mi = np.nonzero(candidates) if candidates is not None else np.divmod(np.arange(g * m), m)
     ok = hulls.num_points[mirrors[mi]] > 0
     gi, mi = gi[ok], mi[ok]
@@ -431,11 +440,7 @@ def hidden_after_mirror(scene: "Scene", images: np.ndarray, previous: np.ndarray
     hidden = np.zeros(k, bool)
     hulls = scene.polygon_hulls
     margin = 1e-9 * scene.diagonal
-    kernel = None
-    if compiled is not False and kernels.available():
-        from ._numba import behind_after as kernel
-    elif compiled:
-        raise ImportError("hidden_after_mirror(compiled=True) needs numba (pip install 'wavepaths[fast]')")
+    kernel = _kernel("behind_after", compiled, "hidden_after_mirror")
     idx_all = np.nonzero(hulls.num_points[mirrors] > 0)[0]
     rays = 0
     n_all, d_all = scene.polygon_normal, scene.polygon_offset
