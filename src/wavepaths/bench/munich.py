@@ -152,11 +152,14 @@ def munich_sample(progress_file: str, cell_size: float = 2.0, options: dict | No
 
 def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARGET_BYTES, cell_size: float = 2.0,
                options: dict | None = None, probe: bool = True, probe_timeout_s: float = 900.0,
-               progress=print, sample_first: bool = True, sample_timeout_s: float = 900.0) -> dict:
+               progress=print, sample_first: bool = True, sample_timeout_s: float = 900.0,
+               sample_cells: int = 16) -> dict:
     """Run the munich map once in a child process; report how far it got.
 
-    With ``sample_first``, a child first builds the transmitter context and traces one tile
-    (:func:`munich_sample`, limited to ``sample_timeout_s``); the full map runs only when the
+    With ``sample_first``, a child first builds the transmitter context and traces two strips
+    of ``sample_cells`` cells (:func:`munich_sample`, limited to ``sample_timeout_s``; at R2+D2
+    in the fourteenth session: the context in about 300 s, then 4-5 s per cell, plus about
+    30 s in the first strip for what every tile shares); the full map runs only when the
     extrapolated time fits ``timeout_s``, so a hopeless setting costs minutes, not the full
     limit, and still reports its context (images per order, time, memory) and tile rate.
     When the target settings fail, ``probe`` runs the same map at first order (R1+D0)
@@ -173,7 +176,8 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
         progress(f"munich: context and one tile first (limit {sample_timeout_s:g} s)")
         sfile = os.path.join(out_dir, "munich_sample_progress.json")
         rs = run_isolated("wavepaths.bench.munich", "munich_sample",
-                          {"progress_file": sfile, "cell_size": cell_size, "options": options},
+                          {"progress_file": sfile, "cell_size": cell_size, "options": options,
+                           "cells": sample_cells},
                           timeout_s=sample_timeout_s, memory_limit_bytes=memory_limit)
         sample = dict(rs["result"]) if rs["ok"] else {"error": rs.get("error"), "timed_out": rs.get("timed_out", False)}
         sample["wall_s"] = rs["wall_s"]
