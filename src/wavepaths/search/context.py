@@ -223,6 +223,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
             windows = a >= 1 and "aperture_window" not in options.disable_culling
             culled_aperture = 0
             last_mirror = lv.polygons[:, -1] if windows else None
+            previous = lv.polygons[:, -2] if windows and a >= 2 else None
             # block by block, each block's survivors of every test kept before the next block:
             # the pairs that meet the beams can outnumber the survivors by far (munich, order 2:
             # 68.7 M pairs would not fit in memory at once)
@@ -233,7 +234,7 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
                 if windows:
                     # the incident leg leaves the last mirror: only where it can cross that mirror
                     lo, hi = chain_aperture_windows(scene, lv.last, last_mirror, c, d,
-                                                    None if options.compiled else False)
+                                                    None if options.compiled else False, previous)
                     reach = lo <= hi
                     culled_aperture += int((~reach).sum())
                     c, d, sec = c[reach], d[reach], sec[reach]

@@ -424,8 +424,11 @@ class AperturePlanes:
     center: np.ndarray
 
 
-def aperture_planes(scene: "Scene", I: np.ndarray, q: np.ndarray) -> AperturePlanes | None:
-    """:class:`AperturePlanes` of images ``I`` (k, 3) through their mirrors ``q`` (k,); ``None`` without the float64 rule."""
+def aperture_planes(scene: "Scene", I: np.ndarray, q: np.ndarray, unfold: np.ndarray | None = None) -> AperturePlanes | None:
+    """:class:`AperturePlanes` of images ``I`` (k, 3) through their mirrors ``q`` (k,); ``None`` without the float64 rule.
+
+    ``unfold`` (k,): the mirrors ``q`` are taken mirrored across the plane of polygon
+    ``unfold[i]`` (their images in the unfolded path: see :func:`chain_aperture_windows`)."""
     exact = getattr(scene.raycaster, "exact", None)
     if exact is None:
         return None
@@ -441,6 +444,15 @@ def aperture_planes(scene: "Scene", I: np.ndarray, q: np.ndarray) -> AperturePla
     S = I[rows] - c0
     c = exact.corners[tri]
     n, off, tol = exact.normal[tri], exact.offset[tri], exact.tol[tri]
+    if unfold is not None:
+        # x -> x - 2 (nL.x - dL) nL (recentred); a plane n.x = o becomes
+        # (n - 2 (n.nL) nL).x = o - 2 (n.nL) dL
+        nL = scene.polygon_normal[unfold[rows]]
+        dL = scene.polygon_offset[unfold[rows]] - nL @ c0
+        c = c - 2 * (np.einsum("kij,kj->ki", c, nL) - dL[:, None])[..., None] * nL[:, None, :]
+        dot = np.einsum("ij,ij->i", n, nL)
+        n = n - 2 * dot[:, None] * nL
+        off = off - 2 * dot * dL
     s_s = np.einsum("ij,ij->i", n, S) - off
     sigma = np.sign(s_s)
     valid = s_s != 0
@@ -513,23 +525,40 @@ def windows_through(scene: "Scene", planes: AperturePlanes, image: np.ndarray, d
 
 
 def chain_aperture_windows(scene: "Scene", images: np.ndarray, mirrors: np.ndarray, chain: np.ndarray, d: np.ndarray,
-                           compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+                           compiled: bool | None = None, previous: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`aperture_windows` of pairs (chain ``chain[i]``, dihedron ``d[i]``), for chains
     with last images ``images`` (n, 3) and last mirrors ``mirrors`` (n,): the same windows,
     with each chain's :class:`AperturePlanes` built once for all its pairs (not once per
     pair), then the windows pair by pair, compiled when numba is installed (``compiled``:
-    ``None`` by default, ``False`` the numpy reference)."""
+    ``None`` by default, ``False`` the numpy reference).
+
+    ``previous`` (n,): the mirror before the last one, for chains of order 2 or more. The
+    path ``... -> X_p (on p) -> X_q (on q) -> E`` unfolds across ``q`` into a straight line
+    from the last image through ``X_q`` and through ``X_p'``, the image of ``X_p`` across
+    ``q``'s plane, which lies in ``p'``, the image of ``p``: so the edge point ``E`` must also
+    lie in the aperture of the last image through ``p'`` (:func:`aperture_planes` with
+    ``unfold``), beyond ``p'``. The window is then the intersection of the two (each a
+    superset of what the back-trace accepts on its mirror, so their intersection is one of
+    what it accepts on both)."""
     from . import kernels
 
     chain = np.asarray(chain, dtype=np.int64)
     d = np.asarray(d, dtype=np.int64)
     u, inv = np.unique(chain, return_inverse=True)
-    planes = aperture_planes(scene, np.asarray(images, dtype=np.float64)[u], np.asarray(mirrors, dtype=np.int64)[u])
+    I = np.asarray(images, dtype=np.float64)[u]
+    q = np.asarray(mirrors, dtype=np.int64)[u]
+    planes = aperture_planes(scene, I, q)
     if planes is None:
         L = scene.dihedra.length[d].astype(np.float64)
         return np.zeros(len(d)), L.copy()
     use = compiled is not False and kernels.available()
-    return windows_through(scene, planes, inv.astype(np.int64), d, compiled=use)
+    inv = inv.astype(np.int64)
+    lo, hi = windows_through(scene, planes, inv, d, compiled=use)
+    if previous is not None:
+        unfolded = aperture_planes(scene, I, np.asarray(previous, dtype=np.int64)[u], unfold=q)
+        lo2, hi2 = windows_through(scene, unfolded, inv, d, compiled=use)
+        lo, hi = np.maximum(lo, lo2), np.minimum(hi, hi2)
+    return lo, hi
 
 
 def aperture_windows(scene: "Scene", I: np.ndarray, q: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
