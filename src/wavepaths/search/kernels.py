@@ -26,7 +26,7 @@ the visibility windows (:mod:`wavepaths.search._numba_windows`,
 point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`), the Keller-cone
 culling of the sources per chunk of receivers (``_numba.keller_cone_keep``, same module),
 the back-traces of the image method (``_numba.backtrace``, :mod:`wavepaths.search.images`)
-and the proof that a mirror is hidden from a source (``_numba.behind``,
+and the proof that a mirror is hidden from a source (``_numba_mirrors.behind``,
 :mod:`wavepaths.search.mirror_visibility`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
@@ -34,7 +34,8 @@ numba is an optional dependency (the ``fast`` extra). Without it, or with
 Kernel and reference agree pair for pair except where a quantity lands within rounding
 (~1e-16 relative) of a test's margin (tests/search/test_kernels.py and
 tests/stress/test_stress_compiled.py compare them). The numba code is in
-:mod:`wavepaths.search._numba`, compiled on first use and cached by numba (once per
+:mod:`wavepaths.search._numba` (with the window loops in ``_numba_windows`` and the
+hidden-mirror proofs in ``_numba_mirrors``), compiled on first use and cached by numba (once per
 machine; :func:`warm_up` does it ahead).
 """
 

@@ -216,13 +216,13 @@ def polygon_hulls(scene: "Scene") -> PolygonHulls:
 
 
 def _kernel(name: str, compiled: bool | None, caller: str):
-    """The compiled proof ``_numba.<name>``, or ``None`` for the numpy reference: by default
+    """The compiled proof ``_numba_mirrors.<name>``, or ``None`` for the numpy reference: by default
     when numba is installed, never with ``compiled=False``; ``compiled=True`` without numba
     raises ``ImportError``."""
     if compiled is not False and kernels.available():
-        from . import _numba
+        from . import _numba_mirrors
 
-        return getattr(_numba, name)
+        return getattr(_numba_mirrors, name)
     if compiled:
         raise ImportError(f"{caller}(compiled=True) needs numba (pip install 'wavepaths[fast]')")
     return None
@@ -255,7 +255,7 @@ def hidden_mirrors(scene: "Scene", sources: np.ndarray, group: np.ndarray, mirro
     candidates : (g, m) bool, optional
         Only these pairs are tested (the others are reported not hidden); default all.
     compiled : bool, optional
-        Run the proof pair by pair as a compiled loop (``_numba.behind``, numba): by default
+        Run the proof pair by pair as a compiled loop (``_numba_mirrors.behind``, numba): by default
         when numba is installed; ``False`` runs the numpy reference (:func:`_behind`).
     pilot_stride : int
         Occluder hints are shared along the groups' Morton order: the groups ``0, s, 2s, ...``
@@ -426,7 +426,7 @@ def hidden_after_mirror(scene: "Scene", images: np.ndarray, previous: np.ndarray
     mirrors : (k,) int64
         The new mirror ``q``.
     compiled : bool, optional
-        The proof as a compiled loop (``_numba.behind_after``): by default when numba is
+        The proof as a compiled loop (``_numba_mirrors.behind_after``): by default when numba is
         installed; ``False`` runs the numpy reference (:func:`_after_mirror_numpy`).
 
     Returns
@@ -473,7 +473,7 @@ def _after_mirror_numpy(scene: "Scene", hulls: PolygonHulls, I: np.ndarray, p: n
                         Q: np.ndarray, fI: np.ndarray, margin: float) -> np.ndarray:
     """(k,) bool: the proof of :func:`hidden_after_mirror` for parent images ``I``, previous
     mirrors ``p``, mirrors ``q``, candidate occluders ``Q`` (-1: none) and ``fI``, the images'
-    signed distances to ``p``'s plane; the numpy reference of ``_numba.behind_after``."""
+    signed distances to ``p``'s plane; the numpy reference of ``_numba_mirrors.behind_after``."""
     n_all, d_all = scene.polygon_normal, scene.polygon_offset
     out = np.zeros(len(I), bool)
     use = (Q >= 0) & (Q != q) & (Q != p) & (fI != 0)
