@@ -11,7 +11,8 @@ from wavepaths import TraceOptions, load_scene, trace
 from wavepaths.fields import FieldConfig, compute_fields
 from wavepaths.search.geometry import diffraction_point_parameter
 from wavepaths.validation.compare import SIONNA_DUPLICATE, compare_paths
-from wavepaths.validation.report import SIONNA_ONLY_FAILURE, SIONNA_ONLY_NOT_A_WEDGE, _explain_sionna_only
+from wavepaths.validation.report import (SIONNA_ONLY_FAILURE, SIONNA_ONLY_NOT_A_WEDGE, SIONNA_ONLY_OWN_FACE,
+                                         _explain_sionna_only)
 from wavepaths.validation.sionna_runner import SionnaPaths
 
 
@@ -87,3 +88,37 @@ def test_matching_maximises_the_pairs_within_the_tolerance():
     comp = compare_paths(three, np.full(3, 1e-6 + 0j), sn)
     assert [(m.wp_index, m.sn_index) for m in comp.matches] == [(1, 1)]
     assert abs(comp.matches[0].vertex_error_m - 0.009) < 1e-9
+
+
+def test_a_reflection_off_the_wedges_own_face_is_named():
+    """Sionna RT's D-R at receiver 50 of ``etoile_crop``: a diffraction on a wall's vertical edge,
+    then a reflection 1 cm along that wall (float32 points; |a| at -205 dB). A ray from the edge
+    into the wedge's exterior never meets the wedge's own faces: such a path is named, and the
+    same path reflected off another face still counts as a failure."""
+    scene = load_scene("box_on_ground")  # a 10 m box, faces x, y = +-5, on a ground z = 0
+    tx, rx = np.array([-20.0, -20.0, 12.0]), np.array([-15.0, -30.0, 1.5])
+    p = np.array([-5.0, -5.0, 4.0])  # on the box's vertical edge x = y = -5
+    q_own = np.array([-4.99, -5.0, 3.99])  # on the face y = -5, 1 cm from the edge
+    q_ground = np.array([-8.0, -12.0, 0.0])  # on the ground, away from the edge
+
+    def primitive(obj: int, q: np.ndarray) -> int:
+        # the index, among the object's triangles, of the one that holds q (Sionna's primitive)
+        tris = np.nonzero(scene.triangle_object == obj)[0]
+        for k, tri in enumerate(tris):
+            V = scene.vertices[scene.triangles[tri]]
+            n = np.cross(V[1] - V[0], V[2] - V[0])
+            lam = np.linalg.solve(np.stack([V[1] - V[0], V[2] - V[0], n], axis=1), q - V[0])
+            if abs(lam[2]) < 1e-9 and lam[0] >= 0 and lam[1] >= 0 and lam[0] + lam[1] <= 1:
+                return k
+        raise AssertionError("no triangle holds the point")
+
+    box, ground = scene.object_names.index("box"), scene.object_names.index("ground")
+    # Sionna's object ids index its own names: ("box", "other_box", "ground")
+    rows = [
+        (np.stack([tx, p, q_own, rx]), [2, 1], [0, 0], [primitive(box, p + [1e-3, 0, 0]), primitive(box, q_own)]),
+        (np.stack([tx, p, q_ground, rx]), [2, 1], [0, 2], [0, primitive(ground, q_ground)]),
+        (np.stack([tx, q_own, p, rx]), [1, 2], [0, 0], [primitive(box, q_own), 0]),  # before the edge
+    ]
+    sn = _sionna_paths(rows, depth=2)
+    reasons = [_explain_sionna_only(scene, sn, i) for i in range(len(rows))]
+    assert reasons == [SIONNA_ONLY_OWN_FACE, SIONNA_ONLY_FAILURE, SIONNA_ONLY_OWN_FACE]

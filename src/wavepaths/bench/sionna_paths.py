@@ -23,9 +23,10 @@ Agreement: paths are matched by interaction sequence and vertices
 (:func:`wavepaths.validation.compare.compare_paths`, 2 cm); the report gives how many
 of Sionna's paths wavepaths also finds, how many each finds alone, and the delay and
 |a| differences of the matched ones. A Sionna path without a match is explained as in
-the validation report: either a topology rule (it diffracts on an edge with three or
-more faces and leaves its topological volume, seed §3.1, which wavepaths rejects on
-purpose) or a failure of wavepaths.
+the validation report: a topology rule (it diffracts on an edge with three or more
+faces and leaves its topological volume, seed §3.1, which wavepaths rejects on
+purpose), an edge that is not a wedge, a Sionna duplicate, a reflection off the
+diffracting wedge's own face (a grazing ray without field), or a failure of wavepaths.
 """
 
 from __future__ import annotations

@@ -79,6 +79,9 @@ SIONNA_ONLY_FAILURE = "found by Sionna only: not found by wavepaths (a failure)"
 SIONNA_ONLY_NOT_A_WEDGE = ("not a wedge: Sionna diffracts on an edge whose free-space angle around E and R is at most "
                            "pi (flat or concave, n <= 1: no shadow boundary, UTD's D vanishes at n = 1 and is not "
                            "defined below); wavepaths diffracts only into sectors wider than pi (seed §3.2)")
+SIONNA_ONLY_OWN_FACE = ("own face: Sionna reflects the diffracted ray off a face of the wedge it diffracts on (the "
+                        "ray runs along that face, at grazing incidence: a ray into the wedge's exterior never meets "
+                        "the wedge's own faces, seed §3.2; such a path carries no field)")
 
 
 def _multi_object_dihedra(scene) -> set:
@@ -166,15 +169,9 @@ def _sionna_collapsed_free_edge(scene, paths, match, sn, a_compat) -> bool:
     kinds = sn.interactions[j, : sn.num_interactions[j]].tolist()
     if 2 not in kinds:
         return False
-    k = kinds.index(2)
-    o = _sionna_object_index(scene, sn, int(sn.objects[j, k]))
-    prim = int(sn.primitives[j, k])
-    if o < 0 or prim < 0:
+    tri = _sionna_triangle(scene, sn, j, kinds.index(2))
+    if tri < 0:
         return False
-    tris = np.nonzero(scene.triangle_object == o)[0]
-    if prim >= len(tris):
-        return False
-    tri = tris[prim]
     d = _diffraction_dihedron(paths, i)
     e, origin = scene.dihedra.direction[d], scene.dihedra.origin[d]
     corners = scene.triangles[tri]
@@ -183,8 +180,43 @@ def _sionna_collapsed_free_edge(scene, paths, match, sn, a_compat) -> bool:
     on = corners[dist < 1e-3]
     if len(on) != 2:
         return False
+    tris = np.nonzero(scene.triangle_object == scene.triangle_object[tri])[0]
     others = scene.triangles[tris[tris != tri]]
     return not bool(np.any(np.isin(others, on).sum(axis=1) == 2))
+
+
+def _sionna_triangle(scene, sn, j: int, k: int) -> int:
+    """The scene triangle of Sionna path ``j``'s interaction ``k`` (its object and primitive), or -1."""
+    o = _sionna_object_index(scene, sn, int(sn.objects[j, k]))
+    prim = int(sn.primitives[j, k])
+    if o < 0 or prim < 0:
+        return -1
+    tris = np.nonzero(scene.triangle_object == o)[0]
+    return int(tris[prim]) if prim < len(tris) else -1
+
+
+def _sionna_own_face(scene, sn, j: int, k: int, tol: float) -> bool:
+    """Whether a reflection next to Sionna path ``j``'s diffraction ``k`` is off a triangle that
+    has the diffraction point on one of its sides (within ``tol`` [m]): a face of the wedge itself.
+
+    From a point of an edge, a ray that meets a face through that edge lies in the face's plane:
+    it leaves along the face (grazing, the boundary of the exterior sector) and its reflection
+    has no field. Sionna's float32 points can still land such a ray a centimetre along the face.
+    """
+    p = sn.vertices[j, k + 1]
+    for m in (k - 1, k + 1):
+        if not (0 <= m < sn.num_interactions[j]) or sn.interactions[j, m] != 1:
+            continue
+        tri = _sionna_triangle(scene, sn, j, m)
+        if tri < 0:
+            continue
+        V = scene.vertices[scene.triangles[tri]]
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            e = V[b] - V[a]
+            t = np.clip((p - V[a]) @ e / (e @ e), 0.0, 1.0)
+            if np.linalg.norm(p - V[a] - t * e) < tol:
+                return True
+    return False
 
 
 def _diffraction_dihedron(paths, i: int) -> int:
@@ -194,7 +226,7 @@ def _diffraction_dihedron(paths, i: int) -> int:
 
 def _explain_sionna_only(scene, sn, j: int, sectors=None) -> str:
     """Why a Sionna path has no wavepaths match: a topology rule wavepaths enforces, an edge that
-    is not a wedge, or a failure. ``sectors``: the scene's
+    is not a wedge, a reflection off the diffracting wedge's own face, or a failure. ``sectors``: the scene's
     :func:`~wavepaths.topology.sectors.sector_table`, built here when not given (callers that
     explain many paths build it once)."""
     from ..topology.find_dihedron import find_dihedron
@@ -230,6 +262,9 @@ def _explain_sionna_only(scene, sn, j: int, sectors=None) -> str:
                                dih.origin[dd])
         if np.all(width <= np.pi + scene.tolerances.coplanar_angle):
             return SIONNA_ONLY_NOT_A_WEDGE
+    # Sionna's float32 points lie within about 1e-5 m of the sides they are on at these scales
+    if _sionna_own_face(scene, sn, j, k, 1e-3):
+        return SIONNA_ONLY_OWN_FACE
     return SIONNA_ONLY_FAILURE
 
 
