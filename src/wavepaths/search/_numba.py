@@ -15,12 +15,12 @@ ROWS = 64  # receiver images per parallel block
 @numba.njit(cache=True, nogil=True)
 def _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h, beam,
                   planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi, keller_tol,
-                  window, out_j, cnt, counts):
+                  window, counts):
     # end_sides._receiver_side's tests (numpy reference) for image i against every edge j. A, B,
     # M, origin, direction, x_hat, y_hat come transposed, (3, D): the first two stages run
     # over contiguous rows, branch-free (they vectorise), and the survivors are compacted
-    # into `buf`; they end as out_j[i, :cnt[i]], and counts[i] = the rejections by the
-    # mirror side, beam, aperture and window
+    # into `buf`; returns their count c (they are buf[:c]), counts[i] += the rejections by
+    # the mirror side, beam, aperture and window
     D = A.shape[1]
     P = planes.shape[1]
     Ax, Ay, Az, Bx, By, Bz = A[0], A[1], A[2], B[0], B[1], B[2]
@@ -93,9 +93,7 @@ def _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q
             c2 += (t - v_lo[j] - lo[j] * rho >= -keller_tol) and (t - v_hi[j] - hi[j] * rho <= keller_tol)
         cm[3] += c - c2
         c = c2
-    for k in range(c):
-        out_j[i, k] = buf[k]
-    cnt[i] = c
+    return c
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -110,9 +108,11 @@ def receiver_pairs(I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radiu
         fm = np.ones(D, dtype=np.uint8)
         fb = np.ones(D, dtype=np.uint8)
         for i in range(blk * ROWS, min(E, blk * ROWS + ROWS)):
-            _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h,
-                          beam, planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi,
-                          keller_tol, window, out_j, cnt, counts)
+            c = _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h,
+                              beam, planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi,
+                              keller_tol, window, counts)
+            out_j[i, :c] = buf[:c]
+            cnt[i] = c
 
 
 @numba.njit(cache=True, nogil=True)
@@ -125,9 +125,11 @@ def receiver_pairs_serial(I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q
     fm = np.ones(D, dtype=np.uint8)
     fb = np.ones(D, dtype=np.uint8)
     for i in range(I.shape[0]):
-        _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h, beam,
-                      planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi, keller_tol,
-                      window, out_j, cnt, counts)
+        c = _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h,
+                          beam, planes, aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi,
+                          keller_tol, window, counts)
+        out_j[i, :c] = buf[:c]
+        cnt[i] = c
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -118,6 +118,105 @@ def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = F
     return None if keep.all() else keep
 
 
+MIRROR_REACH_BUDGET = 1 << 28
+"""(polygon, source) pairs above which :func:`mirror_reach` is not built for an order (the
+receiver side then runs without its lists). munich's order-0 sources: 23 k polygons x 5 k
+sources, about 1 s on two threads; its order-2 sources (11 M) would take hours."""
+
+REACH_SLACK = 1e-7
+"""Margin of :func:`mirror_reach` in the cosine domain: the cosines are formed without
+inverse functions, and ``sin theta = sqrt(1 - cos^2 theta)`` carries an absolute error up to
+``sqrt(2.2e-16) ~ 1.5e-8`` near theta = 0 or pi."""
+
+
+@dataclass(frozen=True)
+class MirrorReach:
+    """Per polygon ``p``, the dihedra whose Keller cones, from some source of one order, can
+    reach ``p``'s bounding sphere: ``dihedra[ptr[p]:ptr[p + 1]]``, ascending (CSR).
+
+    A diffracted path leaves the edge along the Keller cone of its incident ray (the cone
+    with the edge as axis, opening the angle of incidence, seed §2.1), and with ``b >= 1``
+    reflections after the edge its first leg ends on the receiver image's last mirror. So a
+    (receiver image, dihedron) pair can hold a path only if the dihedron is in the list of
+    the image's last mirror. The lists depend on the sources only: built once per context
+    and order (:func:`mirror_reach`), they serve every tile.
+    """
+
+    ptr: np.ndarray  # (num_polygons + 1,) int64
+    dihedra: np.ndarray  # (k,) int64
+
+    def sizes(self, polygons: np.ndarray) -> np.ndarray:
+        """(n,) int64: the lengths of the lists of ``polygons``."""
+        return self.ptr[polygons + 1] - self.ptr[polygons]
+
+
+def _reach_cosines(X: np.ndarray, w: np.ndarray, c: np.ndarray, r: float, slack: float):
+    """Per edge end ``X`` (u, 3) with edge direction ``w``: ``cos(max(theta - delta, 0)) + slack``
+    and ``cos(min(theta + delta, pi)) - slack``, with ``theta`` the angle between ``w`` and
+    ``c - X`` and ``delta`` the angular radius of the sphere (``c``, ``r``) seen from X (pi
+    from inside it), formed as cosines of sums (no inverse functions)."""
+    v = c - X
+    dist = np.linalg.norm(v, axis=1)
+    inside = dist <= r
+    d = np.where(inside, 1.0, dist)
+    ct = np.clip(np.einsum("ij,ij->i", v, w) / d, -1.0, 1.0)
+    st = np.sqrt(np.maximum(1.0 - ct * ct, 0.0))
+    sd = np.where(inside, 0.0, r / d)
+    cd = np.sqrt(np.maximum(1.0 - sd * sd, 0.0))
+    lo = np.where(inside | (ct >= cd), 1.0, ct * cd + st * sd)
+    hi = np.where(inside | (ct <= -cd), -1.0, ct * cd - st * sd)
+    return lo + slack, hi - slack
+
+
+def mirror_reach(scene: "Scene", frame: KellerFrame, compiled: bool = False) -> MirrorReach:
+    """The :class:`MirrorReach` lists of the sources of ``frame``, for every polygon.
+
+    The Keller-cone test of :func:`keller_cone_keep` against each polygon's bounding sphere
+    (:func:`~wavepaths.search.images.polygon_spheres`), with the margin :data:`REACH_SLACK`:
+    a source reaches the sphere at some point of its edge iff ``cos_a <= cos(max(theta_A -
+    delta_A, 0))`` and ``cos_b >= cos(min(theta_B + delta_B, pi))``. ``compiled``: both passes
+    (the lengths, then the lists) as parallel loops over polygons
+    (:mod:`wavepaths.search._numba_reach`, the same expressions).
+    """
+    centre, radius = scene.polygon_spheres
+    P = len(radius)
+    if compiled and kernels.available():
+        k = kernels._compiled()
+        c = np.ascontiguousarray
+        args = (c(frame.A), c(frame.B), c(frame.w), c(frame.inv, dtype=np.int64), c(frame.cos_a), c(frame.cos_b),
+                c(centre), c(radius), REACH_SLACK)
+        counts = np.empty(P, np.int64)
+        k["mirror_reach_counts"](*args, counts)
+        ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        out = np.empty(int(ptr[-1]), np.int64)
+        k["mirror_reach_fill"](*args, c(frame.dihedra, dtype=np.int64), ptr, out)
+        return MirrorReach(ptr, out)
+    lists = []
+    for p in range(P):
+        lo_a, _ = _reach_cosines(frame.A, frame.w, centre[p], radius[p], REACH_SLACK)
+        _, hi_b = _reach_cosines(frame.B, frame.w, centre[p], radius[p], REACH_SLACK)
+        keep = (frame.cos_a <= lo_a[frame.inv]) & (frame.cos_b >= hi_b[frame.inv])
+        lists.append(frame.dihedra[np.unique(frame.inv[keep])])
+    ptr = np.concatenate([[0], np.cumsum([len(x) for x in lists])]).astype(np.int64)
+    return MirrorReach(ptr, np.concatenate(lists).astype(np.int64) if lists else np.zeros(0, np.int64))
+
+
+def _mirror_reach(scene: "Scene", ctx: TxContext, a: int) -> MirrorReach | None:
+    """The :func:`mirror_reach` lists of the order-``a`` sources, built once per context
+    (``ctx.derived``); ``None`` above :data:`MIRROR_REACH_BUDGET` or with the test switched off."""
+    if "mirror_reach" in ctx.options.disable_culling:
+        return None
+    key = ("mirror_reach", a)
+    if key not in ctx.derived:
+        _, cone = _source_frames(scene, ctx, a)
+        with kernels.CACHE_LOCK:
+            if key not in ctx.derived:
+                big = scene.num_polygons * max(len(cone.inv), 1) > MIRROR_REACH_BUDGET
+                ctx.derived[key] = None if big else mirror_reach(
+                    scene, cone, ctx.options.compiled and kernels.available())
+    return ctx.derived[key]
+
+
 def _source_frames(scene: "Scene", ctx: TxContext, a: int) -> tuple[_EndSide, KellerFrame]:
     """The transmitter side (:func:`_transmitter_side`) and the :class:`KellerFrame` of all the
     order-``a`` diffraction sources, built once per context (``ctx.derived``); a chunk's
@@ -249,6 +348,24 @@ def _joined_candidates(scene: "Scene", ctx: TxContext, a: int, src, rside: _EndS
         stats[f"{tag}_rejected_lit_region"] += int(rejected[2])
 
 
+LISTED_CHUNK_ROWS = 1 << 17
+"""Receiver images per chunk at most when the chunks follow the reach lists (bounds the
+per-image temporaries, such as the aperture planes, 192 bytes per image at b = 2)."""
+
+
+def _list_chunks(sizes: np.ndarray, budget: int, max_rows: int) -> np.ndarray:
+    """Chunk boundaries (ascending, from 0 to ``len(sizes)``) over consecutive rows, each chunk
+    holding about ``budget`` of ``sizes`` (a row larger than that alone) and at most
+    ``max_rows`` rows."""
+    n = len(sizes)
+    if n == 0:
+        return np.zeros(1, np.int64)
+    cs = np.cumsum(sizes)
+    cuts = np.searchsorted(cs, np.arange(budget, int(cs[-1]), budget), side="right")
+    cuts = np.union1d(cuts, np.arange(max_rows, n, max_rows))
+    return np.unique(np.concatenate([[0], cuts[(cuts > 0) & (cuts < n)], [n]])).astype(np.int64)
+
+
 def spatial_order(level: ImageLevel) -> ImageLevel:
     """The chains of ``level`` reordered along a Morton curve of their last images.
 
@@ -259,6 +376,12 @@ def spatial_order(level: ImageLevel) -> ImageLevel:
     if level.order == 0 or len(level) < 2:
         return level
     o = morton_order(level.last)
+    return ImageLevel(level.source[o], level.polygons[o], level.images[o])
+
+
+def by_last_mirror(level: ImageLevel) -> ImageLevel:
+    """The chains of ``level`` (order >= 1) grouped by their last mirror, in their order within a group."""
+    o = np.argsort(level.polygons[:, -1], kind="stable")
     return ImageLevel(level.source[o], level.polygons[o], level.images[o])
 
 
@@ -285,7 +408,7 @@ def diffraction_tile(
     order-``a`` sources (``ctx.source_edges[a]``); with it
     (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
     queries instead of the dense product when there are more than
-    ``DENSE_RECEIVER_SIDE_MAX_DIHEDRA`` candidate dihedra.
+    ``DENSE_RECEIVER_SIDE_MAX_DIHEDRA`` candidate dihedra and no reach lists.
 
     Also marks in ``grazing`` (m, n) the (tx, rx) pairs for which a candidate lies within
     the float32 uncertainty of a shadow or reflection boundary of its edge: the geometrical
@@ -294,8 +417,10 @@ def diffraction_tile(
 
     Order of the tests, cheapest and most selective first:
 
-    1. per (receiver image, dihedron), dense: the mirror side and beam of the image's
-       last mirror, the sector around the edge (:func:`_receiver_side`);
+    1. per (receiver image, dihedron): for ``b >= 1``, the dihedron in the reach list of the
+       image's last mirror (:class:`MirrorReach`; with the compiled kernels only the listed
+       pairs are visited, in chunks of about ``COMPILED_PAIR_BUDGET`` of them), the mirror
+       side and beam of that mirror; the sector around the edge (:func:`_receiver_side`);
     2. the join with the transmitter side on (dihedron, sector): FindDihedron (seed
        §3.3) accepts E-P-R exactly when E and R lie in the same sector of the edge (a
        sector is a prism around the edge line), whose bounding faces are the true
@@ -323,11 +448,23 @@ def diffraction_tile(
     # temporaries, the compiled one a single int32 array of the survivors' columns
     per_pair, budget = (1, COMPILED_PAIR_BUDGET) if compiled else (m + 4, CANDIDATE_BUDGET)
     step = max(1, budget // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
+    # with b >= 1, each image meets only the dihedra in its last mirror's reach list
+    reach = _mirror_reach(scene, ctx, a) if b >= 1 else None
+    if reach is not None and compiled and a == 0:
+        # one source per (transmitter, dihedron): the Keller-cone culling per chunk of nearby
+        # images gains little here, while images that share their last mirror, side by side,
+        # let the kernel gather that mirror's list once for all of them
+        rx_lv = by_last_mirror(rx_lv)
+    if reach is not None and compiled:
+        # the compiled kernel walks the lists: chunks of about `budget` listed pairs
+        bounds = _list_chunks(reach.sizes(rx_lv.polygons[:, -1]), budget, LISTED_CHUNK_ROWS)
+    else:
+        bounds = np.append(np.arange(0, len(rx_lv), step), len(rx_lv))
     # receiver images in chunks of consecutive rows: in Morton order (:func:`spatial_order`),
     # each chunk is compact in space, and the Keller-cone culling below keeps fewer dihedra
     # for it (etoile_crop at depth 3: 608 M -> 327 M pairs at b = 2)
-    for s in range(0, len(rx_lv), step):
-        e_rows = np.arange(s, min(len(rx_lv), s + step))
+    for s, s_end in zip(bounds[:-1], bounds[1:]):
+        e_rows = np.arange(s, s_end)
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
         # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
         src, tside = src_all, tside_all
@@ -342,11 +479,11 @@ def diffraction_tile(
             continue
         stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
         window = None if "keller_window" in ctx.options.disable_culling else _keller_window(scene, tside)
-        if (b >= 1 and edges is not None and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA
+        if (b >= 1 and edges is not None and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA and reach is None
                 and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling):
             rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag, window)
         else:
-            rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
+            rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window, reach)
         for rows, src_rows, t in _joined_candidates(scene, ctx, a, src, rside, tside, stats, tag):
             out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag,
                                            rside, rows, tside, src_rows, t, pending)

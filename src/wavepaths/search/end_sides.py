@@ -173,7 +173,7 @@ def _last_mirror_planes(scene: "Scene", rx_lv: ImageLevel, e_rows: np.ndarray):
 
 
 def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray, diffr: np.ndarray,
-                   stats: Counter, tag: str, window=None) -> _EndSide:
+                   stats: Counter, tag: str, window=None, reach=None) -> _EndSide:
     """Step 1 of :func:`diffraction_tile`, dense over (receiver images ``e_rows``) x (dihedra ``diffr``).
 
     The culling tests are outer products of a per-image and a per-edge vector (matrix
@@ -181,6 +181,9 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     scene's resolution at any offset), so nothing is gathered per pair for them; the
     sector is then computed per surviving pair, from ``R - A``. Tests:
 
+    * for ``b >= 1`` with ``reach`` (:class:`~wavepaths.search.diffraction.MirrorReach`),
+      *mirror reach*: the dihedron must be in the reach list of the image's last mirror
+      (some source's Keller cone reaches that mirror's bounding sphere);
     * for ``b >= 1``, *mirror side*: the edge must have a point on the real side of the
       image's last mirror ``q`` (the leg from the diffraction point to the last image
       must cross ``q``'s plane, image method); both edge ends beyond the plane (within
@@ -193,8 +196,10 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
       diffraction point lies on the edge;
     * the sector: not on a face, and wider than pi.
     """
+    if rx_lv.order == 0:
+        reach = None
     if ctx.options.compiled and kernels.available():
-        return _receiver_side_compiled(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window)
+        return _receiver_side_compiled(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window, reach)
     dihedra = scene.dihedra
     c0 = scene.center
     I = rx_lv.last[e_rows] - c0  # (E, 3)
@@ -203,13 +208,16 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     L = dihedra.length[diffr]
     ok = np.ones((len(e_rows), len(diffr)), dtype=bool)
     disabled = ctx.options.disable_culling
+    if reach is not None:
+        ok = _listed_pairs(reach, rx_lv.polygons[e_rows, -1], _columns(scene, diffr), len(diffr))
+        stats[f"{tag}_receiver_pairs_rejected_mirror_reach"] += int((~ok).sum())
     if rx_lv.order >= 1 and "receiver_mirror_side" not in disabled:
         n, off, side, tol = _last_mirror_planes(scene, rx_lv, e_rows)
         sa = side[:, None] * (n @ A.T - off[:, None])
         sb = side[:, None] * (n @ (A + L[:, None] * w).T - off[:, None])
-        reach = np.maximum(sa, sb) > -tol
-        stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += int((~reach).sum())
-        ok &= reach
+        front = np.maximum(sa, sb) > -tol
+        stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += int((ok & ~front).sum())
+        ok &= front
     if rx_lv.order >= 1 and "receiver_beam" not in disabled:
         q = rx_lv.polygons[e_rows, -1]
         centre, radius = scene.polygon_spheres
@@ -238,8 +246,28 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     return _kept_pairs_end_side(scene, ctx, rx_lv, e_rows[ie], diffr[idd], window, stats, tag)
 
 
+def _columns(scene: "Scene", diffr: np.ndarray) -> np.ndarray:
+    """(num_dihedra,) int64: each dihedron's column among ``diffr``, -1 for the others."""
+    col = np.full(len(scene.dihedra.length), -1, np.int64)
+    col[diffr] = np.arange(len(diffr))
+    return col
+
+
+def _listed_pairs(reach, q: np.ndarray, col: np.ndarray, D: int) -> np.ndarray:
+    """(E, D) bool: the (image, column) pairs whose dihedron is in the reach list of the
+    image's last mirror ``q`` (E,) (:class:`~wavepaths.search.diffraction.MirrorReach`)."""
+    uq, inv = np.unique(q, return_inverse=True)
+    size = reach.sizes(uq)
+    row = np.repeat(np.arange(len(uq)), size)
+    pos = np.repeat(reach.ptr[uq], size) + np.arange(len(row)) - np.repeat(np.cumsum(size) - size, size)
+    j = col[reach.dihedra[pos]]
+    table = np.zeros((len(uq), D), dtype=bool)
+    table[row[j >= 0], j[j >= 0]] = True
+    return table[inv.ravel()]
+
+
 def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray,
-                            diffr: np.ndarray, stats: Counter, tag: str, window=None) -> _EndSide:
+                            diffr: np.ndarray, stats: Counter, tag: str, window=None, reach=None) -> _EndSide:
     """:func:`_receiver_side` with the mirror-side, beam and Keller-window tests fused per pair
     (:func:`wavepaths.search.kernels.receiver_pairs`, numba); the same tests and margins, then
     the sector per surviving pair, as the numpy reference does.
@@ -277,8 +305,13 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
     if window is not None:
         v_lo, lo, v_hi, hi = window
         win = (v_lo[diffr], lo[diffr], v_hi[diffr], hi[diffr], scene.length_tolerance(1e-9))
-    ie, idd, n_mirror, n_beam, n_aperture, n_window = kernels.receiver_pairs(I, mirror, A, B, beam, aperture, R,
-                                                                             frame, win)
+    listed = None
+    if reach is not None and rx_lv.order >= 1:
+        listed = (rx_lv.polygons[e_rows, -1], reach.ptr, reach.dihedra, _columns(scene, diffr))
+    ie, idd, n_mirror, n_beam, n_aperture, n_window, tested = kernels.receiver_pairs(
+        I, mirror, A, B, beam, aperture, R, frame, win, listed=listed)
+    if listed is not None:
+        stats[f"{tag}_receiver_pairs_rejected_mirror_reach"] += len(e_rows) * len(diffr) - tested
     if mirror is not None:
         stats[f"{tag}_receiver_pairs_rejected_mirror_side"] += n_mirror
     if beam is not None:

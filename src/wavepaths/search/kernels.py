@@ -68,7 +68,12 @@ def _compiled():
     except ImportError:
         return None
 
+    from . import _numba_reach
+
     return {"receiver_pairs": _numba.receiver_pairs, "receiver_pairs_serial": _numba.receiver_pairs_serial,
+            "receiver_pairs_listed": _numba_reach.receiver_pairs_listed,
+            "receiver_pairs_listed_serial": _numba_reach.receiver_pairs_listed_serial,
+            "mirror_reach_counts": _numba_reach.mirror_reach_counts, "mirror_reach_fill": _numba_reach.mirror_reach_fill,
             "chain_side_planes": _numba.chain_side_planes, "reflection_pairs": _numba.reflection_pairs,
             "chains_edges": _numba.chains_edges, "reflection_pairs_flat": _numba.reflection_pairs_flat}
 
@@ -317,7 +322,8 @@ def receiver_pairs(
     frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     window: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None,
     parallel: bool | None = None,
-) -> tuple[np.ndarray, np.ndarray, int, int, int, int]:
+    listed: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, int, int, int, int, int]:
     """The dense receiver-side tests of :func:`wavepaths.search.end_sides._receiver_side`, fused per pair.
 
     Parameters
@@ -349,6 +355,13 @@ def receiver_pairs(
     parallel : bool, optional
         Run blocks of images on the kernels' threads; default: for calls of at least
         :data:`PARALLEL_MIN_PAIRS` pairs when there are threads.
+    listed : (q (E,), ptr, dihedra, col_of) or None
+        Test each image only against the edges of its last mirror's reach list
+        (:class:`~wavepaths.search.diffraction.MirrorReach`: ``dihedra[ptr[q]:ptr[q + 1]]``),
+        those of them that are among the D edges (``col_of`` maps a dihedron to its column,
+        -1 for none); the same tests, in the same order, on those pairs, the images grouped
+        by last mirror and each group's edges gathered once
+        (:func:`wavepaths.search._numba_reach.receiver_pairs_listed`).
 
     Returns
     -------
@@ -357,15 +370,21 @@ def receiver_pairs(
     rejected_mirror_side, rejected_beam, rejected_aperture, rejected_keller_window : int
         How many pairs each test rejected (each pair counted by the first test it fails, in
         this order).
+    tested : int
+        How many pairs the tests saw: ``E * D``, or with ``listed`` the listed ones.
     """
+    E, D = len(I), len(A)
+    if listed is not None:
+        size = listed[1][listed[0] + 1] - listed[1][listed[0]]  # each image's list length
     if parallel is None:
         # numba's default threading layer (workqueue) must not be entered from two threads at
         # once: only the main thread starts the parallel kernel (a Dask worker's task threads
         # run the serial one)
-        parallel = (len(I) * len(A) >= PARALLEL_MIN_PAIRS and threads() > 1
+        work = E * D if listed is None else int(size.sum())
+        parallel = (work >= PARALLEL_MIN_PAIRS and threads() > 1
                     and threading.current_thread() is threading.main_thread())
-    k = _compiled()["receiver_pairs" if parallel else "receiver_pairs_serial"]
-    E, D = len(I), len(A)
+    name = "receiver_pairs" if listed is None else "receiver_pairs_listed"
+    k = _compiled()[name if parallel else name + "_serial"]
     z1 = np.zeros(D)
     if mirror is None:
         n, off, side, plane_tol = np.zeros((E, 3)), np.zeros(E), np.zeros(E), 0.0
@@ -376,19 +395,41 @@ def receiver_pairs(
     planes, aperture_tol = aperture if aperture is not None else (np.zeros((E, 0, 3)), 0.0)
     v_lo, lo, v_hi, hi, keller_tol = window if window is not None else (z1, z1, z1, z1, 0.0)
     origin, direction, x_hat, y_hat = frame
-    out_j = np.empty((E, D), dtype=np.int32)
     cnt = np.empty(E, dtype=np.int64)
-    counts = np.zeros((E, 4), dtype=np.int64)
+    counts = np.zeros((E, 5), dtype=np.int64)
     c = np.ascontiguousarray
 
     def t(x):  # per-edge arrays transposed, (3, D)
         return np.ascontiguousarray(np.asarray(x).T)
 
-    k(c(I), c(n), c(off), c(side), t(A), t(B), float(plane_tol), mirror is not None,
-               c(to_q), c(dist_q), c(radius_q), t(M), c(h), beam is not None, c(planes), float(aperture_tol),
-               c(R), t(origin), t(direction), t(x_hat), t(y_hat), c(v_lo), c(lo), c(v_hi), c(hi),
-               float(keller_tol), window is not None, out_j, cnt, counts)
-    rows = np.repeat(np.arange(E), cnt)
-    cols = out_j[rows, np.arange(len(rows)) - np.repeat(np.cumsum(cnt) - cnt, cnt)].astype(np.int64)
+    args = (c(I), c(n), c(off), c(side), t(A), t(B), float(plane_tol), mirror is not None,
+            c(to_q), c(dist_q), c(radius_q), t(M), c(h), beam is not None, c(planes), float(aperture_tol),
+            c(R), t(origin), t(direction), t(x_hat), t(y_hat), c(v_lo), c(lo), c(v_hi), c(hi),
+            float(keller_tol), window is not None)
+    if listed is None:
+        out_j = np.empty((E, D), dtype=np.int32)
+        k(*args, out_j, cnt, counts)
+        rows = np.repeat(np.arange(E), cnt)
+        cols = out_j[rows, np.arange(len(rows)) - np.repeat(np.cumsum(cnt) - cnt, cnt)].astype(np.int64)
+        tested = E * D
+    else:
+        q, ptr, idx, col_of = listed
+        start = np.cumsum(size) - size
+        out_j = np.empty(max(int(size.sum()), 1), dtype=np.int32)
+        order = np.argsort(q, kind="stable")  # the images in groups of one last mirror
+        gq, gfirst = np.unique(q[order], return_index=True)
+        gstart = np.append(gfirst, E)
+        import numba
+
+        # groups differ in size: hand them to the threads a few at a time (dynamic scheduling)
+        chunk = numba.set_parallel_chunksize(4)
+        try:
+            k(*args, order.astype(np.int64), gstart.astype(np.int64), c(gq, dtype=np.int64), c(ptr, dtype=np.int64),
+              c(idx, dtype=np.int64), c(col_of, dtype=np.int64), start.astype(np.int64), out_j, cnt, counts)
+        finally:
+            numba.set_parallel_chunksize(chunk)
+        rows = np.repeat(np.arange(E), cnt)
+        cols = out_j[start[rows] + np.arange(len(rows)) - np.repeat(np.cumsum(cnt) - cnt, cnt)].astype(np.int64)
+        tested = int(counts[:, 4].sum())
     n = counts.sum(axis=0)
-    return rows, cols, int(n[0]), int(n[1]), int(n[2]), int(n[3])
+    return rows, cols, int(n[0]), int(n[1]), int(n[2]), int(n[3]), tested

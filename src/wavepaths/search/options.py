@@ -11,6 +11,8 @@ from ..errors import WavepathsError
 
 CULLING_TESTS: dict[str, str] = {
     "keller_cone": "per receiver chunk, (source, dihedron) pairs whose Keller cones miss the chunk's sphere",
+    "mirror_reach": "(receiver image, dihedron) pairs whose dihedron's Keller cones, from every source, miss the "
+                    "bounding sphere of the image's last mirror",
     "receiver_mirror_side": "(receiver image, dihedron) pairs whose edge lies behind the image's last mirror",
     "receiver_beam": "(receiver image, dihedron) pairs whose edge lies outside the image's beam",
     "receiver_aperture": "(receiver image, dihedron) pairs whose edge lies outside the beams through the image's "
@@ -30,6 +32,7 @@ CULLING_TESTS: dict[str, str] = {
 
 CULLING_COUNTERS: dict[str, str] = {
     "keller_cone": r"diffraction_\dr_\dr_source_pairs_culled_keller_cone",
+    "mirror_reach": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_reach",
     "receiver_mirror_side": r"diffraction_\dr_\dr_receiver_pairs_rejected_mirror_side",
     "receiver_beam": r"diffraction_\dr_\dr_receiver_pairs_rejected_beam",
     "receiver_aperture": r"diffraction_\dr_\dr_receiver_pairs_rejected_aperture",
