@@ -455,6 +455,8 @@ def diffraction_tile(
         # images gains little here, while images that share their last mirror, side by side,
         # let the kernel gather that mirror's list once for all of them
         rx_lv = by_last_mirror(rx_lv)
+    else:
+        rx_lv = spatial_order(rx_lv)
     if reach is not None and compiled:
         # the compiled kernel walks the lists: chunks of about `budget` listed pairs
         bounds = _list_chunks(reach.sizes(rx_lv.polygons[:, -1]), budget, LISTED_CHUNK_ROWS)

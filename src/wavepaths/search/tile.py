@@ -19,7 +19,7 @@ from ..errors import ImageTreeTooLarge
 from .beams import reflection_candidates
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
-from .diffraction import diffraction_tile, spatial_order
+from .diffraction import diffraction_tile
 from .images import backtrace, build_image_levels
 from .paths import InteractionType, PathBatch
 
@@ -136,7 +136,6 @@ def _diffraction_part(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset:
                 pend.rx = pend.rx + lo
         return out
     stats.update({f"rx_{k}": v for k, v in rx_stats.items()})
-    rx_levels = [spatial_order(lv) for lv in rx_levels]
     tree = opts.diffraction_reflections >= 1 and ctx.apertures is not None and bool(ctx.source_edges)
     out = []
     for a in range(opts.diffraction_reflections + 1):
