@@ -79,19 +79,31 @@ def mirror_reach_fill(A, B, w, inv, cos_a, cos_b, centre, radius, slack, dihedra
 def _group(g, order, gstart, gq, I, n, off, side, A, B, plane_tol, mirror, to_q, dist_q, radius_q, M, h, beam, planes,
            aperture_tol, R, origin, direction, x_hat, y_hat, v_lo, lo, v_hi, hi, keller_tol, window, ptr, idx, col_of,
            start, out_j, cnt, counts):
-    # the images order[gstart[g]:gstart[g + 1]], which share their last mirror gq[g]: the edges
-    # of its reach list that are among the chunk's columns are gathered once into contiguous
-    # arrays, then _numba._receiver_row runs over them for each image (the same tests in the
-    # same order, vectorised); the survivors, mapped back to the chunk's columns, end at
+    # the images order[gstart[g]:gstart[g + 1]], which share their last mirror gq[g] and the
+    # side of their previous images: the edges of the mirror's reach list that are among the
+    # chunk's columns, and (with `mirror`) on that side, the mirror-side test of
+    # _numba._receiver_row once per edge for the whole group (its expression, with the first
+    # image's plane, which every image of the group shares), are gathered into contiguous
+    # arrays; then _receiver_row runs over them for each image (the other tests, in the same
+    # order, vectorised); the survivors, mapped back to the chunk's columns, end at
     # out_j[start[i]:start[i] + cnt[i]], and counts[i, 4] += the listed pairs
     q = gq[g]
+    i0 = order[gstart[g]]
+    s = side[i0]
+    n0, n1, n2, o = s * n[i0, 0], s * n[i0, 1], s * n[i0, 2], s * off[i0]  # s = +-1: exact
     cols = np.empty(ptr[q + 1] - ptr[q], np.int64)
     m = 0
+    listed = 0
     for k in range(ptr[q], ptr[q + 1]):
         j = col_of[idx[k]]
-        if j >= 0:
-            cols[m] = j
-            m += 1
+        if j < 0:
+            continue
+        listed += 1
+        if mirror and not (max(n0 * A[0, j] + n1 * A[1, j] + n2 * A[2, j],
+                               n0 * B[0, j] + n1 * B[1, j] + n2 * B[2, j]) - o > -plane_tol):
+            continue
+        cols[m] = j
+        m += 1
     Ag, Bg, Mg = np.empty((3, m)), np.empty((3, m)), np.empty((3, m))
     og, dg, xg, yg = np.empty((3, m)), np.empty((3, m)), np.empty((3, m)), np.empty((3, m))
     hg, vlo_g, lo_g, vhi_g, hi_g = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
@@ -115,14 +127,15 @@ def _group(g, order, gstart, gq, I, n, off, side, A, B, plane_tol, mirror, to_q,
     fb = np.ones(m, np.uint8)
     for r in range(gstart[g], gstart[g + 1]):
         i = order[r]
-        c = _receiver_row(i, buf, fm, fb, I, n, off, side, Ag, Bg, plane_tol, mirror, to_q, dist_q, radius_q, Mg, hg,
+        c = _receiver_row(i, buf, fm, fb, I, n, off, side, Ag, Bg, plane_tol, False, to_q, dist_q, radius_q, Mg, hg,
                           beam, planes, aperture_tol, R, og, dg, xg, yg, vlo_g, lo_g, vhi_g, hi_g, keller_tol, window,
                           counts)
         base = start[i]
         for k in range(c):
             out_j[base + k] = cols[buf[k]]
         cnt[i] = c
-        counts[i, 4] += m
+        counts[i, 0] += listed - m
+        counts[i, 4] += listed
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

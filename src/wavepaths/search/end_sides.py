@@ -306,7 +306,9 @@ def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e
         v_lo, lo, v_hi, hi = window
         win = (v_lo[diffr], lo[diffr], v_hi[diffr], hi[diffr], scene.length_tolerance(1e-9))
     listed = None
-    if reach is not None and rx_lv.order >= 1:
+    # (the kernel groups the images by last mirror and side; a parent image on the mirror's
+    # plane, side 0, which the image trees never keep, would take the dense kernel)
+    if reach is not None and rx_lv.order >= 1 and (mirror is None or bool(np.all(mirror[2] != 0))):
         listed = (rx_lv.polygons[e_rows, -1], reach.ptr, reach.dihedra, _columns(scene, diffr))
     ie, idd, n_mirror, n_beam, n_aperture, n_window, tested = kernels.receiver_pairs(
         I, mirror, A, B, beam, aperture, R, frame, win, listed=listed)

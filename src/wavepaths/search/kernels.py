@@ -416,8 +416,12 @@ def receiver_pairs(
         q, ptr, idx, col_of = listed
         start = np.cumsum(size) - size
         out_j = np.empty(max(int(size.sum()), 1), dtype=np.int32)
-        order = np.argsort(q, kind="stable")  # the images in groups of one last mirror
-        gq, gfirst = np.unique(q[order], return_index=True)
+        # the images in groups of one last mirror and one side of it (side = +-1: the image
+        # trees keep a parent image only off its mirror's plane)
+        key = 2 * q + (np.asarray(side) < 0) if mirror is not None else 2 * q
+        order = np.argsort(key, kind="stable")
+        gkey, gfirst = np.unique(key[order], return_index=True)
+        gq = gkey // 2
         gstart = np.append(gfirst, E)
         import numba
 
