@@ -464,7 +464,8 @@ def diffraction_tile(
         bounds = np.append(np.arange(0, len(rx_lv), step), len(rx_lv))
     # receiver images in chunks of consecutive rows: in Morton order (:func:`spatial_order`),
     # each chunk is compact in space, and the Keller-cone culling below keeps fewer dihedra
-    # for it (etoile_crop at depth 3: 608 M -> 327 M pairs at b = 2)
+    # for it (etoile_crop at depth 3: 608 M -> 327 M pairs at b = 2); by last mirror, the
+    # lists do that culling
     for s, s_end in zip(bounds[:-1], bounds[1:]):
         e_rows = np.arange(s, s_end)
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
