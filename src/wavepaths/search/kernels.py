@@ -135,6 +135,9 @@ def warm_up() -> bool:
     z3 = np.zeros((2, 3))
     frame = (z3, z3, z3, z3)
     receiver_pairs(z3, None, z3, z3, None, None, z3, frame, None, parallel=True)
+    one = np.zeros(2, np.int64)  # two images on polygon 0, whose list holds dihedron 0 (column 0)
+    receiver_pairs(z3, None, z3, z3, None, None, z3, frame, None, parallel=True,
+                   listed=(one, np.array([0, 1]), np.zeros(1, np.int64), np.zeros(1, np.int64)))
     return True
 
 
