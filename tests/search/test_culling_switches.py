@@ -46,14 +46,15 @@ def test_unknown_culling_test_is_an_error():
 
 
 def test_receiver_side_by_edge_tree_finds_the_same_paths_as_the_dense_one(monkeypatch, rng):
-    """The two implementations of the receiver side (dense products, edge-tree queries) agree
-    (the tree runs without the reach lists, which send every pair to the dense kernels)."""
+    """The two implementations of the numpy receiver side (dense products, edge-tree queries)
+    agree (the tree runs without the reach lists, which send every pair to the dense form;
+    the compiled receiver side is always dense)."""
     import wavepaths.search.diffraction as diffraction
 
     scene = load_scene("street_canyon")
     rx = _street_receivers(rng, 30)
     tx = np.array([[-60.0, 0.0, 10.0]])
-    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, rx_batch=8)
+    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=2, rx_batch=8, compiled=False)
     dense = trace(scene, tx, rx, opts)
     monkeypatch.setattr(diffraction, "DENSE_RECEIVER_SIDE_MAX_DIHEDRA", 0)
     tree = trace(scene, tx, rx, opts.with_(disable_culling={"mirror_reach"}))

@@ -27,9 +27,11 @@ from .paths import InteractionType, PathBatch
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
 
-# the receiver side of order >= 1 is dense (matrix products over images x dihedra) up to this
-# many dihedra, tree queries above: dense was 2.6x faster with 640 (etoile_crop, R3+D2) and
-# 1.5x with ~100 (simple_street_canyon map, R2+D1); the tree's cost grows as log(dihedra)
+# the numpy receiver side of order >= 1 is dense (matrix products over images x dihedra) up to
+# this many dihedra, tree queries above: dense was 2.6x faster with 640 (etoile_crop, R3+D2) and
+# 1.5x with ~100 (simple_street_canyon map, R2+D1); the tree's cost grows as log(dihedra). The
+# compiled receiver side is always dense: on munich's R2+D2 strip, with 5 k to 30 k dihedra per
+# chunk, R-D-R took 1.7 s dense against 2.7 s through the tree (two rounds each)
 DENSE_RECEIVER_SIDE_MAX_DIHEDRA = 4096
 COMPILED_PAIR_BUDGET = 1 << 23
 """(receiver image, dihedron) pairs per chunk of :func:`diffraction_tile` with the compiled
@@ -406,7 +408,7 @@ def diffraction_tile(
 
     ``edges``: the context's :func:`~wavepaths.search.beams.edge_tree` over the dihedra of the
     order-``a`` sources (``ctx.source_edges[a]``); with it
-    (and the context's apertures) the receiver side of order ``b >= 1`` is found by tree
+    (and the context's apertures) the numpy receiver side of order ``b >= 1`` is found by tree
     queries instead of the dense product when there are more than
     ``DENSE_RECEIVER_SIDE_MAX_DIHEDRA`` candidate dihedra and no reach lists.
 
@@ -447,7 +449,7 @@ def diffraction_tile(
     # receiver images per chunk: the numpy receiver side holds about m + 4 (images x dihedra)
     # temporaries, the compiled one a single int32 array of the survivors' columns
     per_pair, budget = (1, COMPILED_PAIR_BUDGET) if compiled else (m + 4, CANDIDATE_BUDGET)
-    step = max(1, budget // (max(len(np.unique(src_all.dihedron)), 1) * per_pair))
+    step = max(1, budget // (max(len(cone.dihedra), 1) * per_pair))
     # with b >= 1, each image meets only the dihedra in its last mirror's reach list
     reach = _mirror_reach(scene, ctx, a) if b >= 1 else None
     if reach is not None and compiled and a == 0:
@@ -471,19 +473,22 @@ def diffraction_tile(
         # Keller-cone culling for this chunk of receivers (or receiver images): keep the
         # (source, dihedron) pairs whose diffracted cones can reach the chunk's bounding sphere
         src, tside = src_all, tside_all
+        diffr = cone.dihedra  # the distinct dihedra of the sources, ascending
         if "keller_cone" not in ctx.options.disable_culling:
             keep = keller_cone_keep(cone, rx_lv.last[e_rows], compiled)
             if keep is not None:
                 rows = np.nonzero(keep)[0]
                 src, tside = src_all.take(rows), tside_all.take(rows)
+                kept = np.zeros(len(cone.dihedra), dtype=bool)  # (a mask: np.unique sorts millions of rows)
+                kept[cone.inv[rows]] = True
+                diffr = cone.dihedra[kept]
         stats[f"{tag}_source_pairs_culled_keller_cone"] += len(src_all.chain) - len(src.chain)
-        diffr = np.unique(src.dihedron)
         if len(diffr) == 0:
             continue
         stats[f"{tag}_receiver_pairs"] += len(e_rows) * len(diffr)
         window = None if "keller_window" in ctx.options.disable_culling else _keller_window(scene, tside)
-        if (b >= 1 and edges is not None and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA and reach is None
-                and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling):
+        if (b >= 1 and edges is not None and not compiled and len(diffr) > DENSE_RECEIVER_SIDE_MAX_DIHEDRA
+                and reach is None and not {"receiver_mirror_side", "receiver_beam"} & ctx.options.disable_culling):
             rside = _receiver_side_by_tree(scene, ctx, rx_lv, e_rows, diffr, edges, stats, tag, window)
         else:
             rside = _receiver_side(scene, ctx, rx_lv, e_rows, diffr, stats, tag, window, reach)
