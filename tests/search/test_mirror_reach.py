@@ -68,3 +68,22 @@ def test_compiled_lists_equal_numpy(a):
     got = mirror_reach(scene, frame, compiled=True)
     np.testing.assert_array_equal(got.ptr, ref.ptr)
     np.testing.assert_array_equal(got.dihedra, ref.dihedra)
+
+
+def test_list_chunks_cover_every_row_within_the_budget(rng):
+    """The chunks of the listed receiver side: consecutive, every row once, at most
+    ``max_rows`` rows, and at most ``budget`` listed pairs beyond a chunk's first row (a row
+    larger than the budget starts a chunk of its own)."""
+    from wavepaths.search.diffraction import _list_chunks
+
+    sizes = rng.integers(0, 50, 1000)
+    sizes[[10, 500]] = 400  # rows larger than the budget: a chunk of their own
+    for budget, max_rows in ((100, 64), (10_000, 64), (100, 10_000)):
+        b = _list_chunks(sizes, budget, max_rows)
+        assert b[0] == 0 and b[-1] == len(sizes) and np.all(np.diff(b) > 0)
+        for lo, hi in zip(b[:-1], b[1:]):
+            assert hi - lo <= max_rows
+            assert sizes[lo + 1:hi].sum() <= budget
+        if budget < 400:
+            assert {10, 500} <= set(b.tolist())  # each larger row starts a chunk
+    assert list(_list_chunks(np.zeros(0, np.int64), 100, 64)) == [0]

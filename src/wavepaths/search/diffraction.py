@@ -356,8 +356,9 @@ per-image temporaries, such as the aperture planes, 192 bytes per image at b = 2
 
 
 def _list_chunks(sizes: np.ndarray, budget: int, max_rows: int) -> np.ndarray:
-    """Chunk boundaries (ascending, from 0 to ``len(sizes)``) over consecutive rows, each chunk
-    holding about ``budget`` of ``sizes`` (a row larger than that alone) and at most
+    """Chunk boundaries (ascending, from 0 to ``len(sizes)``) over consecutive rows: a chunk
+    ends where the running sum of ``sizes`` crosses a multiple of ``budget``, so it holds at
+    most ``budget`` beyond its first row (a row larger than that starts a chunk), and at most
     ``max_rows`` rows."""
     n = len(sizes)
     if n == 0:
