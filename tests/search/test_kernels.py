@@ -11,7 +11,8 @@ import wavepaths.search.end_sides as tile
 from wavepaths.scene import load_scene
 from wavepaths.search import TraceOptions, kernels, trace
 from wavepaths.search.context import build_tx_context
-from wavepaths.search.diffraction import _source_frames, mirror_reach
+from wavepaths.search.diffraction import _source_frames
+from wavepaths.search.reach import mirror_reach
 from wavepaths.search.images import build_image_levels
 
 from .helpers import path_keys

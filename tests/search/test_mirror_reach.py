@@ -1,4 +1,4 @@
-"""The per-mirror reach lists of the receiver side (``diffraction.mirror_reach``): a dihedron
+"""The per-mirror reach lists of the receiver side (``reach.mirror_reach``): a dihedron
 left out of a polygon's list has no edge point whose diffracted cone meets the polygon."""
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ import pytest
 from wavepaths.scene import load_scene
 from wavepaths.search import TraceOptions, kernels
 from wavepaths.search.context import build_tx_context
-from wavepaths.search.diffraction import _source_frames, mirror_reach
+from wavepaths.search.diffraction import _source_frames
+from wavepaths.search.reach import mirror_reach
 from wavepaths.search.geometry import diffraction_point_parameter
 
 needs_numba = pytest.mark.skipif(not kernels.available(), reason="numba not installed (the `fast` extra)")

@@ -1,4 +1,4 @@
-"""The numba twins of the per-mirror reach lists (:func:`wavepaths.search.diffraction.mirror_reach`)
+"""The numba twins of the per-mirror reach lists (:func:`wavepaths.search.reach.mirror_reach`)
 and of the receiver side restricted to them (:func:`wavepaths.search.end_sides._receiver_side`
 with ``reach``), imported only when numba is installed; the numpy functions named in each
 comment are the references."""
@@ -13,7 +13,7 @@ from ._numba import ROWS, _receiver_row
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _reach_cosines(x0, x1, x2, w0, w1, w2, c0, c1, c2, r, slack):
-    # diffraction._reach_cosines at one edge end X: cos(max(theta - delta, 0)) + slack and
+    # reach._reach_cosines at one edge end X: cos(max(theta - delta, 0)) + slack and
     # cos(min(theta + delta, pi)) - slack, theta = angle(w, c - X), delta = the sphere's
     # angular radius from X (pi from inside it); the cosines of sums, no inverse functions
     v0, v1, v2 = c0 - x0, c1 - x1, c2 - x2
@@ -31,7 +31,7 @@ def _reach_cosines(x0, x1, x2, w0, w1, w2, c0, c1, c2, r, slack):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _polygon_reach(p, A, B, w, inv, cos_a, cos_b, centre, radius, slack, reach_a, reach_b, mark):
-    # diffraction.mirror_reach for one polygon p: marks the distinct dihedra (rows of A) with a
+    # reach.mirror_reach for one polygon p: marks the distinct dihedra (rows of A) with a
     # source whose cone reaches p's sphere; returns how many
     u = A.shape[0]
     c0, c1, c2, r = centre[p, 0], centre[p, 1], centre[p, 2], radius[p]
@@ -50,7 +50,7 @@ def _polygon_reach(p, A, B, w, inv, cos_a, cos_b, centre, radius, slack, reach_a
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def mirror_reach_counts(A, B, w, inv, cos_a, cos_b, centre, radius, slack, counts):
-    # pass 1 of diffraction.mirror_reach: the length of every polygon's list
+    # pass 1 of reach.mirror_reach: the length of every polygon's list
     u = A.shape[0]
     P = centre.shape[0]
     for blk in numba.prange((P + ROWS - 1) // ROWS):

@@ -181,7 +181,7 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     scene's resolution at any offset), so nothing is gathered per pair for them; the
     sector is then computed per surviving pair, from ``R - A``. Tests:
 
-    * for ``b >= 1`` with ``reach`` (:class:`~wavepaths.search.diffraction.MirrorReach`),
+    * for ``b >= 1`` with ``reach`` (:class:`~wavepaths.search.reach.MirrorReach`),
       *mirror reach*: the dihedron must be in the reach list of the image's last mirror
       (some source's Keller cone reaches that mirror's bounding sphere);
     * for ``b >= 1``, *mirror side*: the edge must have a point on the real side of the
@@ -209,7 +209,7 @@ def _receiver_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np
     ok = np.ones((len(e_rows), len(diffr)), dtype=bool)
     disabled = ctx.options.disable_culling
     if reach is not None:
-        ok = _listed_pairs(reach, rx_lv.polygons[e_rows, -1], _columns(scene, diffr), len(diffr))
+        ok = reach.mask(rx_lv.polygons[e_rows, -1], _columns(scene, diffr), len(diffr))
         stats[f"{tag}_receiver_pairs_rejected_mirror_reach"] += int((~ok).sum())
     if rx_lv.order >= 1 and "receiver_mirror_side" not in disabled:
         n, off, side, tol = _last_mirror_planes(scene, rx_lv, e_rows)
@@ -251,19 +251,6 @@ def _columns(scene: "Scene", diffr: np.ndarray) -> np.ndarray:
     col = np.full(len(scene.dihedra.length), -1, np.int64)
     col[diffr] = np.arange(len(diffr))
     return col
-
-
-def _listed_pairs(reach, q: np.ndarray, col: np.ndarray, D: int) -> np.ndarray:
-    """(E, D) bool: the (image, column) pairs whose dihedron is in the reach list of the
-    image's last mirror ``q`` (E,) (:class:`~wavepaths.search.diffraction.MirrorReach`)."""
-    uq, inv = np.unique(q, return_inverse=True)
-    size = reach.sizes(uq)
-    row = np.repeat(np.arange(len(uq)), size)
-    pos = np.repeat(reach.ptr[uq], size) + np.arange(len(row)) - np.repeat(np.cumsum(size) - size, size)
-    j = col[reach.dihedra[pos]]
-    table = np.zeros((len(uq), D), dtype=bool)
-    table[row[j >= 0], j[j >= 0]] = True
-    return table[inv.ravel()]
 
 
 def _receiver_side_compiled(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e_rows: np.ndarray,

@@ -360,7 +360,7 @@ def receiver_pairs(
         :data:`PARALLEL_MIN_PAIRS` pairs when there are threads.
     listed : (q (E,), ptr, dihedra, col_of) or None
         Test each image only against the edges of its last mirror's reach list
-        (:class:`~wavepaths.search.diffraction.MirrorReach`: ``dihedra[ptr[q]:ptr[q + 1]]``),
+        (:class:`~wavepaths.search.reach.MirrorReach`: ``dihedra[ptr[q]:ptr[q + 1]]``),
         those of them that are among the D edges (``col_of`` maps a dihedron to its column,
         -1 for none); the same tests, in the same order, on those pairs: the images grouped
         by last mirror and side of it, the mirror-side test once per group and edge, the
