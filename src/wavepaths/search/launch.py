@@ -1,0 +1,396 @@
+"""Launched candidates: the diffracted sequences that Keller fans from sampled edge points carry.
+
+The exhaustive search (:mod:`wavepaths.search.diffraction`) enumerates every (source image,
+edge, receiver image) triple that no conservative test rules out. In a dense city most of
+them are occluded: munich at two reflections around the edge keeps some 400,000 candidates
+per receiver for about 15 paths. This module finds candidates in proportion to the paths
+instead, by sampling, in two steps:
+
+1. **Edge samples** (:func:`edge_samples`). For each order ``a`` of reflections before the
+   edge, the context's (source image, dihedron) pairs and their windows (the parts of each
+   edge that the transmitter, or its image through the last mirror, may reach;
+   :class:`~wavepaths.search.context.DiffractionSources`) are sampled along the edge, every
+   ``max(spacing, angular * distance to the image)`` metres. Each sample is back-traced
+   through its mirrors (:func:`~wavepaths.search.images.backtrace`: every reflection point
+   inside its polygon) and its legs are cast; a sample is kept when it, or a neighbour on
+   the same window, is lit (so a lit stretch shorter than the spacing still starts a fan).
+   No transmitter rays are launched: the sources and windows are the exact engine's, so no
+   edge is missed for being seen at a grazing angle.
+2. **Keller fans** (:func:`candidate_sequences`). From every kept sample, ``fan`` rays on
+   the Keller cone of the incident direction (seed §2.1: ``v . w = u . w``), in the
+   wedge's exterior, are traced through up to ``D - a`` specular reflections (first hits
+   from the ray caster, reflected in float64). Every segment carries the sequence
+   (mirrors before, dihedron, mirrors after so far) to the query points within its tube:
+   a radius that grows from the sample spacing by the fan's and the samples' angular
+   spacing, times ``radius_factor``.
+
+What comes out is a set of *candidate sequences* per point, not paths: each must still be
+solved exactly (closed-form diffraction point between the two unfolded ends, back-traces,
+casts) by the exact engine. The sampling can miss a sequence (a mirror smaller than the
+fan's spacing at its distance); how often is measured against the exhaustive search, on
+the street canyon by ``tests/search/test_launch.py`` and on munich by
+``benchmarks/launch_completeness.py``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Iterator
+
+import numpy as np
+
+from ..errors import WavepathsError
+from .chains import occluded_chains
+from .images import backtrace
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+    from .context import TxContext
+
+
+@dataclass(frozen=True)
+class LaunchOptions:
+    """How densely the edges and the Keller cones are sampled.
+
+    Attributes
+    ----------
+    fan : int
+        Directions per full turn of a Keller cone (only those in the wedge's exterior are traced).
+    spacing : float
+        Smallest spacing of the samples along an edge [m].
+    angular : float
+        Spacing of the samples along an edge as seen from their source image [rad]:
+        a sample every ``max(spacing, angular * distance)`` metres.
+    radius_factor : float
+        Tube radius over the sampling spacing (1 would just close the gaps of a regular grid).
+    fan_rays : int
+        Fan rays traced at once (bounds the working memory, about 200 B per ray).
+    """
+
+    fan: int = 256
+    spacing: float = 0.25
+    angular: float = 2.5e-3
+    radius_factor: float = 2.0
+    fan_rays: int = 1 << 21
+
+    def __post_init__(self) -> None:
+        if self.fan < 4:
+            raise WavepathsError(f"LaunchOptions.fan must be at least 4 (got {self.fan})")
+        if not (self.spacing > 0 and self.angular > 0 and self.radius_factor > 0):
+            raise WavepathsError("LaunchOptions.spacing, angular and radius_factor must be positive")
+
+
+@dataclass(frozen=True)
+class EdgeSamples:
+    """Lit points on the diffracting edges, struct of arrays over ``k`` samples.
+
+    Attributes
+    ----------
+    order : (k,) int64
+        Reflections before the edge (``a``).
+    chain : (k, A) int64
+        Mirrors before the edge in path order, ``-1`` past ``order``.
+    dihedron : (k,) int64
+    t : (k,) float64
+        Position along the edge [m from its origin].
+    incident : (k, 3) float64
+        Unit direction of arrival (from the source's image to the point).
+    spacing : (k,) float64
+        Spacing of the samples on this window [m].
+    angular : (k,) float64
+        That spacing seen from the source image [rad].
+    """
+
+    order: np.ndarray
+    chain: np.ndarray
+    dihedron: np.ndarray
+    t: np.ndarray
+    incident: np.ndarray
+    spacing: np.ndarray
+    angular: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.order)
+
+
+@dataclass(frozen=True)
+class CandidateSequences:
+    """Diffracted sequences that reach query points, struct of arrays over ``s`` rows.
+
+    Attributes
+    ----------
+    point : (s,) int64
+        Row of the query points.
+    before : (s, D) int64
+        Mirrors before the edge in path order, ``-1`` padded.
+    dihedron : (s,) int64
+    after : (s, D) int64
+        Mirrors after the edge in path order, ``-1`` padded.
+    """
+
+    point: np.ndarray
+    before: np.ndarray
+    dihedron: np.ndarray
+    after: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.point)
+
+    def keys(self) -> set[tuple]:
+        """``{(point, (mirrors before..., dihedron), (mirrors after...))}``, for comparisons."""
+        out = set()
+        for p, bf, d, af in zip(self.point.tolist(), self.before.tolist(), self.dihedron.tolist(), self.after.tolist()):
+            out.add((p, tuple(x for x in bf if x >= 0) + (d,), tuple(x for x in af if x >= 0)))
+        return out
+
+
+def _windows(scene: "Scene", src) -> tuple[np.ndarray, np.ndarray]:
+    """The ``[lo, hi]`` part of each pair's edge to sample [m]: its window, the whole edge without one."""
+    L = scene.dihedra.length[src.dihedron]
+    v = src.visible
+    if v is None:
+        return np.zeros_like(L), L
+    lo = np.where(v.open0, 0.0, np.clip(v.lo, 0.0, L))
+    hi = np.where(v.open1, L, np.clip(v.hi, 0.0, L))
+    return lo, np.maximum(hi, lo)
+
+
+def edge_samples(scene: "Scene", ctx: "TxContext", options: LaunchOptions = LaunchOptions()) -> EdgeSamples:
+    """Lit sample points on the edges of every source order of ``ctx`` (step 1 of the module).
+
+    Parameters
+    ----------
+    scene : Scene
+    ctx : TxContext
+        Built with diffraction (its ``diffraction_sources``; one transmitter).
+    options : LaunchOptions
+
+    Returns
+    -------
+    EdgeSamples
+    """
+    D = scene.dihedra
+    A = max(len(ctx.diffraction_sources) - 1, 0)
+    parts = []
+    for a, src in enumerate(ctx.diffraction_sources):
+        if len(src.dihedron) == 0:
+            continue
+        lv = ctx.levels[a]
+        lo, hi = _windows(scene, src)
+        d = src.dihedron
+        image = lv.images[src.chain, -1]
+        mid = D.origin[d] + (0.5 * (lo + hi))[:, None] * D.direction[d]
+        dist = np.linalg.norm(mid - image, axis=1)
+        spacing = np.maximum(options.spacing, options.angular * dist)
+        count = np.ceil((hi - lo) / spacing).astype(np.int64) + 1
+        row = np.repeat(np.arange(len(d)), count)
+        j = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
+        frac = np.where(count[row] > 1, j / np.maximum(count[row] - 1, 1), 0.5)
+        t = lo[row] + (hi - lo)[row] * frac
+        x = D.origin[d[row]] + t[:, None] * D.direction[d[row]]
+        chain = src.chain[row]
+        lit = np.zeros(len(row), dtype=bool)
+        if a == 0:
+            verts = np.stack([image[row], x], axis=1)
+            lit = ~occluded_chains(scene, verts, _Discard())
+        else:
+            ok, pts, _ = backtrace(scene, x, lv, chain, compiled=ctx.options.compiled)
+            if len(ok):
+                verts = np.concatenate([lv.images[chain[ok], :1], pts, x[ok, None, :]], axis=1)
+                lit[ok] = ~occluded_chains(scene, verts, _Discard())
+        # a sample also stands for its lit neighbours on the same window (a lit stretch
+        # between two samples still starts a fan)
+        same_prev = np.zeros(len(row), dtype=bool)
+        same_prev[1:] = row[1:] == row[:-1]
+        keep = lit.copy()
+        keep[1:] |= lit[:-1] & same_prev[1:]
+        keep[:-1] |= lit[1:] & same_prev[1:]
+        k = np.nonzero(keep)[0]
+        inc = x[k] - image[row[k]]
+        length = np.linalg.norm(inc, axis=1)
+        inc /= np.where(length > 0, length, 1.0)[:, None]
+        pad = np.full((len(k), A), -1, np.int64)
+        pad[:, :a] = lv.polygons[chain[k]]
+        parts.append((np.full(len(k), a, np.int64), pad, d[row[k]], t[k], inc, spacing[row[k]],
+                      spacing[row[k]] / np.maximum(length, 1e-9)))
+    if not parts:
+        z = np.zeros(0, np.int64)
+        return EdgeSamples(z, np.zeros((0, A), np.int64), z, np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    return EdgeSamples(*(np.concatenate(c) for c in zip(*parts)))
+
+
+class _Discard(dict):
+    """A stats sink (the casts of the sampling are not the engine's)."""
+
+    def __missing__(self, key):
+        return 0
+
+
+def keller_fan(scene: "Scene", dihedron: np.ndarray, t: np.ndarray, incident: np.ndarray, fan: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Directions on the Keller cone of each sample, in its wedge's exterior.
+
+    With ``w`` the unit edge vector and ``u`` the incident direction, the diffracted
+    directions are ``v = (u . w) w + sin(beta) (cos(phi) f0 + sin(phi) w x f0)``
+    (seed §2.1, ``cos(beta) = u . w``), ``f0`` the first face's in-plane direction, for
+    ``fan`` angles ``phi`` spaced evenly over a turn. For a wedge of two faces, the
+    directions between the faces through the interior angle (below pi) are dropped.
+
+    Returns
+    -------
+    point : (k, 3) float64
+        The samples on their edges [m].
+    direction : (k, fan, 3) float64
+    exterior : (k, fan) bool
+    sin_beta : (k,) float64
+    """
+    D = scene.dihedra
+    w = D.direction[dihedron]
+    point = D.origin[dihedron] + t[:, None] * w
+    cb = np.einsum("ij,ij->i", incident, w)
+    sb = np.sqrt(np.clip(1.0 - cb * cb, 0.0, 1.0))
+    f0 = D.face_direction[D.face_ptr[dihedron]]
+    g0 = np.cross(w, f0)
+    phi = (np.arange(fan) + 0.5) * (2 * np.pi / fan)
+    c, s = np.cos(phi), np.sin(phi)
+    direction = (cb[:, None, None] * w[:, None, :]
+                 + sb[:, None, None] * (c[None, :, None] * f0[:, None, :] + s[None, :, None] * g0[:, None, :]))
+    two = (D.face_ptr[dihedron + 1] - D.face_ptr[dihedron]) == 2
+    f1 = D.face_direction[np.minimum(D.face_ptr[dihedron] + 1, len(D.face_direction) - 1)]
+    ang = np.mod(np.arctan2(np.einsum("ij,ij->i", f1, g0), np.einsum("ij,ij->i", f1, f0)), 2 * np.pi)
+    lo = np.where(ang < np.pi, 0.0, ang)
+    hi = np.where(ang < np.pi, ang, 2 * np.pi)
+    interior = (phi[None, :] > lo[:, None]) & (phi[None, :] < hi[:, None]) & two[:, None]
+    return point, direction, ~interior, sb
+
+
+def _first_hits(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: float, eps: float):
+    """(polygon or -1, distance along the unit ``direction`` [m]) of each ray's first hit."""
+    caster = scene.raycaster
+    first = getattr(caster, "first_triangle", None)
+    if first is None:
+        raise WavepathsError("launched candidates need a ray caster with first hits (Embree: pip install embreex)")
+    tri = first(origin + eps * direction, origin + far * direction)
+    poly = np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
+    hit = np.nonzero(poly >= 0)[0]
+    dist = np.full(len(origin), far)
+    n = scene.polygon_normal[poly[hit]]
+    den = np.einsum("ij,ij->i", n, direction[hit])
+    num = scene.polygon_offset[poly[hit]] - np.einsum("ij,ij->i", n, origin[hit])
+    ok = np.abs(den) > 1e-12
+    dist[hit[ok]] = num[ok] / den[ok]
+    poly[hit[~ok]] = -1  # a graze along the plane: no reflection
+    return poly, dist
+
+
+def _deposit(start, end, r0, r1, points, budget: int = 1 << 26) -> tuple[np.ndarray, np.ndarray]:
+    """(segment, point) pairs with the point within the segment's tube (radius from r0 at
+    ``start`` to r1 at ``end``, linear in the closest point's parameter)."""
+    from . import kernels
+
+    if kernels.available():
+        from . import _numba_launch
+
+        seg, pt = [], []
+        step = max(1, budget // max(len(points), 1))
+        for s0 in range(0, len(start), step):
+            sl = slice(s0, s0 + step)
+            out = np.zeros((len(start[sl]), len(points)), dtype=np.bool_)
+            _numba_launch.tube_contains(start[sl], end[sl], r0[sl], r1[sl], points, out)
+            i, j = np.nonzero(out)
+            seg.append(i + s0)
+            pt.append(j)
+        return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
+    seg, pt = [], []
+    step = max(1, budget // max(len(points), 1) // 8)
+    for s0 in range(0, len(start), step):
+        S, E = start[s0:s0 + step], end[s0:s0 + step]
+        d = E - S
+        L2 = np.einsum("ij,ij->i", d, d)
+        p = points[None, :, :] - S[:, None, :]
+        u = np.clip(np.einsum("kpj,kj->kp", p, d) / np.where(L2 > 0, L2, 1.0)[:, None], 0.0, 1.0)
+        q = p - u[..., None] * d[:, None, :]
+        r = r0[s0:s0 + step, None] + u * (r1 - r0)[s0:s0 + step, None]
+        i, j = np.nonzero(np.einsum("kpj,kpj->kp", q, q) <= r * r)
+        seg.append(i + s0)
+        pt.append(j)
+    return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
+
+
+def _fan_chunks(samples: EdgeSamples, fan: int, fan_rays: int) -> Iterator[np.ndarray]:
+    step = max(1, fan_rays // fan)
+    for s0 in range(0, len(samples), step):
+        yield np.arange(s0, min(len(samples), s0 + step))
+
+
+def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
+                        options: LaunchOptions = LaunchOptions(),
+                        samples: EdgeSamples | None = None) -> CandidateSequences:
+    """The diffracted sequences whose Keller fans pass near each of ``points`` (step 2).
+
+    Parameters
+    ----------
+    scene : Scene
+    ctx : TxContext
+        Built with diffraction for one transmitter; ``ctx.options.diffraction_reflections``
+        (``D``) bounds the reflections before plus after the edge.
+    points : (p, 3) float64
+        Query points (receivers) [m].
+    options : LaunchOptions
+    samples : EdgeSamples, optional
+        From :func:`edge_samples` (computed when not given).
+
+    Returns
+    -------
+    CandidateSequences
+        Distinct rows (point, before, dihedron, after).
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    if samples is None:
+        samples = edge_samples(scene, ctx, options)
+    Dmax = ctx.options.diffraction_reflections
+    far = 2.0 * scene.diagonal
+    eps = 1e-6 * scene.diagonal  # rays leave an edge or a mirror: skip the float32 re-hit of their own face
+    dphi = 2 * np.pi / options.fan
+    width = 2 + 2 * Dmax  # point, before (D), dihedron, after (D) -> packed below
+    found = []
+    for rows in _fan_chunks(samples, options.fan, options.fan_rays):
+        P, V, ext, sb = keller_fan(scene, samples.dihedron[rows], samples.t[rows], samples.incident[rows], options.fan)
+        si, fi = np.nonzero(ext)
+        origin, u = P[si], V[si, fi]
+        sample = rows[si]
+        # tube radius: the sample spacing, plus the fan's and the samples' angular spacing times the distance
+        r_edge = options.radius_factor * samples.spacing[sample]
+        grow = options.radius_factor * (sb[si] * dphi + samples.angular[sample])
+        travelled = np.zeros(len(si))
+        after = np.full((len(si), Dmax), -1, np.int64)
+        for b in range(Dmax + 1):
+            live = samples.order[sample] + b <= Dmax
+            origin, u, sample, r_edge, grow, travelled, after = (
+                x[live] for x in (origin, u, sample, r_edge, grow, travelled, after))
+            if len(origin) == 0:
+                break
+            poly, dist = _first_hits(scene, origin, u, far, eps)
+            end = origin + dist[:, None] * u
+            seg, pt = _deposit(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points)
+            if len(seg):
+                s = sample[seg]
+                row = np.empty((len(seg), width), np.int64)
+                row[:, 0] = pt
+                row[:, 1:1 + Dmax] = samples.chain[s][:, :Dmax] if samples.chain.shape[1] >= Dmax else np.pad(
+                    samples.chain[s], ((0, 0), (0, Dmax - samples.chain.shape[1])), constant_values=-1)
+                row[:, 1 + Dmax] = samples.dihedron[s]
+                row[:, 2 + Dmax:] = after[seg]
+                found.append(np.unique(row, axis=0))
+            hit = poly >= 0
+            if b == Dmax or not hit.any():
+                break
+            n = scene.polygon_normal[poly[hit]]
+            v = u[hit]
+            u = v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n
+            origin, sample, r_edge, grow = end[hit], sample[hit], r_edge[hit], grow[hit]
+            travelled = travelled[hit] + dist[hit]
+            after = after[hit]
+            after[:, b] = poly[hit]
+    rows = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, width), np.int64)
+    return CandidateSequences(rows[:, 0], rows[:, 1:1 + Dmax], rows[:, 1 + Dmax], rows[:, 2 + Dmax:])
