@@ -138,3 +138,21 @@ def test_interleaved_rounds_turn_the_order_so_each_contender_runs_in_each_place(
     # every contender has been first, second and third once
     for n in "abc":
         assert sorted(r.index(n) for r in rounds) == [0, 1, 2]
+
+
+def test_launch_completeness_benchmark_counts_found_sequences_and_power():
+    """The launched-candidates benchmark on the street canyon, 8 receivers, one fan density:
+    its counts add up (per order, found <= paths; the totals are their sums), and at 256
+    directions per turn it finds every sequence there (the street-canyon test of
+    ``search.launch`` asserts the same on other receivers)."""
+    from wavepaths.bench.launch import launch_completeness
+    from wavepaths.bench.scenes import STREET_CANYON_TX
+
+    out = launch_completeness("simple_street_canyon", STREET_CANYON_TX, cells=8, fans=(256,), progress=lambda m: None)
+    row = out["fans"][0]
+    assert out["diffracted_paths"] > 50
+    assert sum(v["paths"] for v in row["per_order"].values()) == out["diffracted_paths"]
+    assert sum(v["found"] for v in row["per_order"].values()) == row["found"]
+    assert row["found"] + len(row["missed"]) == out["diffracted_paths"]
+    assert row["found"] == out["diffracted_paths"] and row["power_fraction"] == 1.0
+    assert 0 < row["candidates_per_receiver"] < out["exhaustive_candidates_per_receiver"]
