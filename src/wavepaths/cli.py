@@ -54,6 +54,8 @@ def _trace_options(args):
         lit_region=not args.no_lit_region,
         prune_db=args.prune_db,
         tolerance_db=getattr(args, "tolerance_db", None),
+        diffraction_candidates=getattr(args, "diffraction_candidates", "exhaustive"),
+        launch_fan=getattr(args, "launch_fan", 256),
     )
 
 
@@ -125,6 +127,11 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
                    help="drop reflections at least this many dB below free space (bound in TraceOptions)")
+    p.add_argument("--diffraction-candidates", choices=["exhaustive", "launched"], default="exhaustive",
+                   help="diffracted candidates: every one no test rules out (default; complete), or those that "
+                        "sampled Keller fans carry to each receiver (dense cities; may miss a path)")
+    p.add_argument("--launch-fan", type=int, default=256,
+                   help="with --diffraction-candidates launched: Keller-cone directions per turn (default 256)")
 
 
 def _add_field_flags(p: argparse.ArgumentParser) -> None:

@@ -88,6 +88,8 @@ class EdgeSamples:
     ----------
     order : (k,) int64
         Reflections before the edge (``a``).
+    source : (k,) int64
+        Row of the (source image, dihedron) pair in ``ctx.diffraction_sources[order]``.
     chain : (k, A) int64
         Mirrors before the edge in path order, ``-1`` past ``order``.
     dihedron : (k,) int64
@@ -102,6 +104,7 @@ class EdgeSamples:
     """
 
     order: np.ndarray
+    source: np.ndarray
     chain: np.ndarray
     dihedron: np.ndarray
     t: np.ndarray
@@ -121,6 +124,10 @@ class CandidateSequences:
     ----------
     point : (s,) int64
         Row of the query points.
+    order : (s,) int64
+        Reflections before the edge (``a``).
+    source : (s,) int64
+        Row of the (source image, dihedron) pair in ``ctx.diffraction_sources[order]``.
     before : (s, D) int64
         Mirrors before the edge in path order, ``-1`` padded.
     dihedron : (s,) int64
@@ -129,6 +136,8 @@ class CandidateSequences:
     """
 
     point: np.ndarray
+    order: np.ndarray
+    source: np.ndarray
     before: np.ndarray
     dihedron: np.ndarray
     after: np.ndarray
@@ -211,11 +220,11 @@ def edge_samples(scene: "Scene", ctx: "TxContext", options: LaunchOptions = Laun
         inc /= np.where(length > 0, length, 1.0)[:, None]
         pad = np.full((len(k), A), -1, np.int64)
         pad[:, :a] = lv.polygons[chain[k]]
-        parts.append((np.full(len(k), a, np.int64), pad, d[row[k]], t[k], inc, spacing[row[k]],
+        parts.append((np.full(len(k), a, np.int64), row[k], pad, d[row[k]], t[k], inc, spacing[row[k]],
                       spacing[row[k]] / np.maximum(length, 1e-9)))
     if not parts:
         z = np.zeros(0, np.int64)
-        return EdgeSamples(z, np.zeros((0, A), np.int64), z, np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+        return EdgeSamples(z, z, np.zeros((0, A), np.int64), z, np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
     return EdgeSamples(*(np.concatenate(c) for c in zip(*parts)))
 
 
@@ -352,7 +361,7 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
     far = 2.0 * scene.diagonal
     eps = 1e-6 * scene.diagonal  # rays leave an edge or a mirror: skip the float32 re-hit of their own face
     dphi = 2 * np.pi / options.fan
-    width = 2 + 2 * Dmax  # point, before (D), dihedron, after (D) -> packed below
+    width = 4 + 2 * Dmax  # point, order, source, before (D), dihedron, after (D)
     found = []
     for rows in _fan_chunks(samples, options.fan, options.fan_rays):
         P, V, ext, sb = keller_fan(scene, samples.dihedron[rows], samples.t[rows], samples.incident[rows], options.fan)
@@ -377,10 +386,12 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
                 s = sample[seg]
                 row = np.empty((len(seg), width), np.int64)
                 row[:, 0] = pt
-                row[:, 1:1 + Dmax] = samples.chain[s][:, :Dmax] if samples.chain.shape[1] >= Dmax else np.pad(
+                row[:, 1] = samples.order[s]
+                row[:, 2] = samples.source[s]
+                row[:, 3:3 + Dmax] = samples.chain[s][:, :Dmax] if samples.chain.shape[1] >= Dmax else np.pad(
                     samples.chain[s], ((0, 0), (0, Dmax - samples.chain.shape[1])), constant_values=-1)
-                row[:, 1 + Dmax] = samples.dihedron[s]
-                row[:, 2 + Dmax:] = after[seg]
+                row[:, 3 + Dmax] = samples.dihedron[s]
+                row[:, 4 + Dmax:] = after[seg]
                 found.append(np.unique(row, axis=0))
             hit = poly >= 0
             if b == Dmax or not hit.any():
@@ -393,4 +404,5 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
             after = after[hit]
             after[:, b] = poly[hit]
     rows = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, width), np.int64)
-    return CandidateSequences(rows[:, 0], rows[:, 1:1 + Dmax], rows[:, 1 + Dmax], rows[:, 2 + Dmax:])
+    return CandidateSequences(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3:3 + Dmax], rows[:, 3 + Dmax],
+                              rows[:, 4 + Dmax:])

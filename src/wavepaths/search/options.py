@@ -113,6 +113,16 @@ class TraceOptions:
         Run the densest culling loops as compiled kernels when numba is installed (the
         ``fast`` extra; :mod:`wavepaths.search.kernels`); ``False`` runs the numpy
         reference. Both find the same paths.
+    diffraction_candidates : str
+        Where the diffracted candidates come from. ``"exhaustive"`` (default): every
+        (source image, edge, receiver image) triple no conservative test rules out; every
+        path is found. ``"launched"``: the sequences that Keller fans from sampled edge
+        points carry to each receiver (:mod:`wavepaths.search.launch`), solved by the same
+        exact tests (:mod:`wavepaths.search.launched`); far fewer candidates in dense
+        scenes, but a sequence the sampling misses is missed (one transmitter per context).
+    launch_fan : int
+        With ``"launched"``: Keller-cone directions per turn (denser: thinner tubes, fewer
+        candidates, more rays).
     """
 
     los: bool = True
@@ -127,6 +137,8 @@ class TraceOptions:
     tolerance_db: float | None = None
     disable_culling: frozenset = frozenset()
     compiled: bool = True
+    diffraction_candidates: str = "exhaustive"
+    launch_fan: int = 256
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "disable_culling", frozenset(self.disable_culling))
@@ -144,6 +156,11 @@ class TraceOptions:
             raise WavepathsError(f"`max_reflections` must be in 0..6, got {self.max_reflections}")
         if not 0 <= self.diffraction_reflections <= 4:
             raise WavepathsError(f"`diffraction_reflections` must be in 0..4, got {self.diffraction_reflections}")
+        if self.diffraction_candidates not in ("exhaustive", "launched"):
+            raise WavepathsError(f"`diffraction_candidates` must be 'exhaustive' or 'launched', got "
+                                 f"{self.diffraction_candidates!r}")
+        if self.launch_fan < 4:
+            raise WavepathsError(f"`launch_fan` must be at least 4, got {self.launch_fan}")
         if self.rx_batch < 1:
             raise WavepathsError(f"`rx_batch` must be positive, got {self.rx_batch}")
 

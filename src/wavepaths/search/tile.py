@@ -159,7 +159,12 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
     batches: list[PathBatch] = []
     grazing = np.zeros((len(ctx.tx), len(rx)), dtype=bool)
     if opts.diffraction and len(ctx.diffracting):
-        batches += _diffraction_part(scene, ctx, rx, rx_offset, stats, grazing, pending)
+        if opts.diffraction_candidates == "launched":
+            from .launched import launched_diffraction
+
+            batches += launched_diffraction(scene, ctx, rx, rx_offset, stats, grazing, pending)
+        else:
+            batches += _diffraction_part(scene, ctx, rx, rx_offset, stats, grazing, pending)
     if opts.los:
         batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
     for k in range(1, opts.max_reflections + 1):

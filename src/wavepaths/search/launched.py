@@ -1,0 +1,134 @@
+"""Diffracted paths from launched candidates: the exact engine's tests on sampled sequences.
+
+With ``TraceOptions(diffraction_candidates="launched")`` the diffracted paths of a tile come
+from the candidate sequences of :mod:`wavepaths.search.launch` instead of the enumeration of
+:func:`~wavepaths.search.diffraction.diffraction_tile`. Each candidate names its
+transmitter-side source (a row of ``ctx.diffraction_sources[a]``: the image chain before the
+edge and the dihedron) and the mirrors after the edge; from there the steps are the
+exhaustive search's own, so a launched path is exactly the path that search finds:
+
+1. the receiver's image through the mirrors after the edge, last mirror first (its
+   receiver-side image chain), projected on the edge: the sector around the edge, wider
+   than pi (:func:`~wavepaths.search.end_sides._kept_pairs_end_side`'s tests);
+2. the same sector as the source's (FindDihedron, seed §3.3: the join key);
+3. :func:`~wavepaths.search.diffraction._diffraction_prefilter`: the closed-form point
+   (seed §2.3) on the edge, not proven hidden, the lit-region option;
+4. :func:`~wavepaths.search.diffraction._diffraction_candidates`: back-traces on both sides,
+   then occlusion (or the coverage tolerance's pending list).
+
+What the launched search can miss is what the sampling misses (:mod:`wavepaths.search.launch`);
+what it finds, it finds exactly.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import kernels
+from .diffraction import _diffraction_candidates, _diffraction_prefilter, _source_frames
+from .end_sides import _EndSide, _edge_frame, _sector_in_table
+from .geometry import mirror_points
+from .images import ImageLevel
+from .launch import EdgeSamples, LaunchOptions, candidate_sequences, edge_samples
+from .paths import PathBatch
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+    from .context import TxContext
+
+
+def launch_options(ctx: "TxContext") -> LaunchOptions:
+    """The :class:`LaunchOptions` of a context's trace options (``launch_fan``)."""
+    return LaunchOptions(fan=ctx.options.launch_fan)
+
+
+def context_samples(scene: "Scene", ctx: "TxContext") -> EdgeSamples:
+    """The context's edge samples (:func:`~wavepaths.search.launch.edge_samples`), built
+    once per context (``ctx.derived``) and shared by its tiles."""
+    key = ("launch_samples", ctx.options.launch_fan)
+    got = ctx.derived.get(key)
+    if got is None:
+        with kernels.CACHE_LOCK:
+            got = ctx.derived.get(key)
+            if got is None:
+                got = edge_samples(scene, ctx, launch_options(ctx))
+                ctx.derived[key] = got
+    return got
+
+
+def receiver_images(scene: "Scene", rx: np.ndarray, point: np.ndarray, after: np.ndarray) -> ImageLevel:
+    """Receiver-side image chains of the candidates: ``rx[point]`` mirrored across the
+    mirrors after the edge, last first.
+
+    Parameters
+    ----------
+    rx : (n, 3) float64
+    point : (k,) int64
+        Receiver of each chain.
+    after : (k, b) int64
+        Mirrors after the edge, in path order.
+
+    Returns
+    -------
+    ImageLevel
+        Order ``b``, ``polygons`` from the receiver outward (``after`` reversed), ``source`` = ``point``.
+    """
+    polys = np.ascontiguousarray(after[:, ::-1])
+    k, b = polys.shape
+    images = np.empty((k, b + 1, 3))
+    images[:, 0] = rx[point]
+    for j in range(b):
+        q = polys[:, j]
+        images[:, j + 1] = mirror_points(images[:, j], scene.polygon_normal[q], scene.polygon_offset[q])
+    return ImageLevel(np.asarray(point, np.int64), polys, images)
+
+
+def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_offset: int, stats: Counter,
+                         grazing: np.ndarray, pending: list | None = None) -> list[PathBatch]:
+    """The diffracted paths of a tile of receivers from launched candidates (module docstring).
+
+    Counts in ``stats``: ``launched_candidates`` (sequences carried to the tile's
+    receivers), per (a, b) ``diffraction_{a}r_{b}r_candidates`` (those of the group) and
+    ``..._rejected_sector`` (receiver side in no sector wider than pi, or not in the
+    source's), then the exhaustive search's counters of steps 3 and 4.
+    """
+    opts = ctx.options
+    samples = context_samples(scene, ctx)
+    seq = candidate_sequences(scene, ctx, rx, launch_options(ctx), samples)
+    stats["launched_candidates"] += len(seq)
+    out: list[PathBatch] = []
+    Dmax = opts.diffraction_reflections
+    nb = (seq.after >= 0).sum(axis=1)
+    for a in range(Dmax + 1):
+        if a >= len(ctx.diffraction_sources):
+            break
+        tside, _ = _source_frames(scene, ctx, a)
+        for b in range(Dmax + 1 - a):
+            tag = f"diffraction_{a}r_{b}r"
+            sel = np.nonzero((seq.order == a) & (nb == b))[0]
+            if len(sel) == 0:
+                continue
+            stats[f"{tag}_candidates"] += len(sel)
+            rx_lv = receiver_images(scene, rx, seq.point[sel], seq.after[sel, :b])
+            s_rows = seq.source[sel]
+            d = seq.dihedron[sel]
+            x, y, t = _edge_frame(scene, ctx, rx_lv.last, d)
+            sec, width, phi = _sector_in_table(ctx, d, x, y)
+            good = (sec >= 0) & (width > np.pi + scene.tolerances.coplanar_angle)
+            good &= sec == tside.sector[s_rows]
+            stats[f"{tag}_rejected_sector"] += int((~good).sum())
+            e = np.nonzero(good)[0]
+            rside = _EndSide(e, d[e], sec[e], phi[e], t[e], np.hypot(x[e], y[e]))
+            rejected = np.zeros(3, np.int64)
+            rows, src_rows, tt = _diffraction_prefilter(scene, ctx, rside, np.arange(len(e)), tside, s_rows[e],
+                                                        rejected)
+            stats[f"{tag}_rejected_off_edge"] += int(rejected[0])
+            stats[f"{tag}_rejected_{'hidden' if a == 0 else 'aperture'}"] += int(rejected[1])
+            stats[f"{tag}_rejected_lit_region"] += int(rejected[2])
+            if len(rows):
+                out += _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside,
+                                               rows, tside, src_rows, tt, pending)
+    return out
