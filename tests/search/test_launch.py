@@ -118,6 +118,22 @@ def test_the_compiled_tube_test_equals_the_numpy_one(monkeypatch, rng):
     monkeypatch.setattr(kernels, "available", lambda: False)
     ref = set(zip(*(x.tolist() for x in _deposit(S, E, r0, r1, pts))))
     assert got == ref and len(ref) > 100
+    # a planar grid of receivers and long segments from far outside it (clipped to the grid's
+    # box): the bucket walk finds each pair once, and the same pairs
+    xy = np.stack(np.meshgrid(np.arange(-50, 50, 2.0), np.arange(-30, 30, 2.0)), axis=-1).reshape(-1, 2)
+    grid_pts = np.column_stack([xy, np.full(len(xy), 1.5)])
+    S2 = rng.uniform(-400, 400, (400, 3))
+    S2[:, 2] = rng.uniform(0, 60, 400)
+    E2 = rng.uniform(-60, 60, (400, 3))
+    E2[:, 2] = rng.uniform(-5, 5, 400)
+    q0, q1 = rng.uniform(0, 1, 400), rng.uniform(0, 8, 400)
+    monkeypatch.undo()
+    seg, pt = _deposit(S2, E2, q0, q1, grid_pts)
+    pairs = list(zip(seg.tolist(), pt.tolist()))
+    assert len(pairs) == len(set(pairs)) > 1000
+    monkeypatch.setattr(kernels, "available", lambda: False)
+    assert set(pairs) == set(zip(*(x.tolist() for x in _deposit(S2, E2, q0, q1, grid_pts))))
+    monkeypatch.undo()
     # points at a known distance from a segment's middle, perpendicular to it
     d = E - S
     n = np.cross(d, rng.normal(size=(300, 3)))

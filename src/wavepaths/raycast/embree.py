@@ -121,6 +121,34 @@ class EmbreeRayCaster:
             prim[live] = self._nearest(a[live], b[live])
         return prim
 
+    def first_hits(self, origin: np.ndarray, direction: np.ndarray, far: float) -> np.ndarray:
+        """(k,) int64: the triangle each ray ``origin + s direction``, ``0 < s <= far``, meets
+        first, -1 if none (a float32 hint, like :meth:`first_triangle`, for ray launching:
+        :mod:`wavepaths.search.launch`). Origins inside the scene's box; ``direction`` unit."""
+        start = np.asarray(origin, dtype=np.float64).reshape(-1, 3) - self._center
+        unit = np.ascontiguousarray(direction, dtype=np.float32).reshape(-1, 3)
+        k = len(start)
+        start32 = start.astype(np.float32)
+        n = self._threads(k)
+
+        def part(lo: int, hi: int) -> np.ndarray:
+            prim = np.empty(hi - lo, dtype=np.int64)
+            for s in range(lo, hi, self._batch):
+                e = min(hi, s + self._batch)
+                prim[s - lo:e - lo] = self._scene.run(start32[s:e], unit[s:e], dists=np.full(e - s, far, np.float32),
+                                                      query="INTERSECT")
+            return prim
+
+        with _COUNT_LOCK:
+            self._rays += k
+        if n <= 1:
+            return part(0, k)
+        from concurrent.futures import ThreadPoolExecutor
+
+        cuts = np.linspace(0, k, n + 1).astype(int)
+        with ThreadPoolExecutor(max_workers=n) as pool:
+            return np.concatenate(list(pool.map(lambda i: part(cuts[i], cuts[i + 1]), range(n))))
+
     def occluded(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)

@@ -1,8 +1,9 @@
-"""Compiled kernel of :mod:`wavepaths.search.launch` (numba)."""
+"""Compiled kernels of :mod:`wavepaths.search.launch` (numba)."""
 
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 
 @nb.njit(parallel=True, cache=True)
@@ -25,3 +26,97 @@ def tube_contains(start, end, r0, r1, points, out):  # pragma: no cover - compil
             qz = pz - u * dz
             r = r0[k] + u * (r1[k] - r0[k])
             out[k, p] = qx * qx + qy * qy + qz * qz <= r * r
+
+
+@nb.njit(cache=True)
+def _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, out_pt, write):  # pragma: no cover
+    """Points of segment k's tube, each once: the segment is cut into slices of length ``h``;
+    a slice owns the points whose closest parameter falls in it and finds them among the
+    grid buckets within its largest radius plus ``h`` of its middle. Writes them to
+    ``out_pt`` when ``write`` (from index 0); returns how many."""
+    sx, sy, sz = start[k, 0], start[k, 1], start[k, 2]
+    dx, dy, dz = end[k, 0] - sx, end[k, 1] - sy, end[k, 2] - sz
+    L2 = dx * dx + dy * dy + dz * dz
+    L = np.sqrt(L2)
+    rmax = max(r0[k], r1[k])
+    # clip [0, 1] to the points' box grown by rmax (slabs)
+    u0, u1 = 0.0, 1.0
+    hi0 = lo[0] + dims[0] * h
+    hi1 = lo[1] + dims[1] * h
+    hi2 = lo[2] + dims[2] * h
+    for ax in range(3):
+        s = sx if ax == 0 else (sy if ax == 1 else sz)
+        d = dx if ax == 0 else (dy if ax == 1 else dz)
+        a = lo[ax] - rmax
+        b = (hi0 if ax == 0 else (hi1 if ax == 1 else hi2)) + rmax
+        if d == 0.0:
+            if s < a or s > b:
+                return 0
+        else:
+            ta = (a - s) / d
+            tb = (b - s) / d
+            if ta > tb:
+                ta, tb = tb, ta
+            u0 = max(u0, ta)
+            u1 = min(u1, tb)
+    if u0 > u1:
+        return 0
+    n = 0
+    # slices of about h, no more than the grid is wide (longer slices query wider spheres:
+    # still every point once, only slower; a grid of one bucket needs one slice)
+    nslice = max(1, min(int(np.ceil((u1 - u0) * L / h)), 2 * (dims[0] + dims[1] + dims[2]) + 2))
+    du = (u1 - u0) / nslice
+    for j in range(nslice):
+        ua = u0 + j * du
+        ub = u0 + (j + 1) * du
+        um = 0.5 * (ua + ub)
+        mx, my, mz = sx + um * dx, sy + um * dy, sz + um * dz
+        reach = max(r0[k] + ua * (r1[k] - r0[k]), r0[k] + ub * (r1[k] - r0[k])) + 0.5 * du * L + 1e-9
+        i0 = max(0, int(np.floor((mx - reach - lo[0]) / h)))
+        i1 = min(dims[0] - 1, int(np.floor((mx + reach - lo[0]) / h)))
+        j0 = max(0, int(np.floor((my - reach - lo[1]) / h)))
+        j1 = min(dims[1] - 1, int(np.floor((my + reach - lo[1]) / h)))
+        k0 = max(0, int(np.floor((mz - reach - lo[2]) / h)))
+        k1 = min(dims[2] - 1, int(np.floor((mz + reach - lo[2]) / h)))
+        for iz in range(k0, k1 + 1):
+            for iy in range(j0, j1 + 1):
+                for ix in range(i0, i1 + 1):
+                    cell = ix + dims[0] * (iy + dims[1] * iz)
+                    for q in range(bstart[cell], bstart[cell + 1]):
+                        p = order[q]
+                        px = points[p, 0] - sx
+                        py = points[p, 1] - sy
+                        pz = points[p, 2] - sz
+                        u = (px * dx + py * dy + pz * dz) / L2 if L2 > 0.0 else 0.0
+                        u = min(max(u, 0.0), 1.0)
+                        # the slice that owns u (the first and last own the clamped ends)
+                        if (u < ua and j > 0) or (u >= ub and j < nslice - 1):
+                            continue
+                        if j == 0 and u < u0 and u0 > 0.0:
+                            continue
+                        if j == nslice - 1 and u > u1 and u1 < 1.0:
+                            continue
+                        qx = px - u * dx
+                        qy = py - u * dy
+                        qz = pz - u * dz
+                        r = r0[k] + u * (r1[k] - r0[k])
+                        if qx * qx + qy * qy + qz * qz <= r * r:
+                            if write:
+                                out_pt[n] = p
+                            n += 1
+    return n
+
+
+@nb.njit(parallel=True, cache=True)
+def tube_counts(start, end, r0, r1, points, lo, h, dims, bstart, order, counts):  # pragma: no cover - compiled
+    """counts[k]: the points in segment k's tube (:func:`_segment_points`)."""
+    dummy = np.empty(0, np.int64)
+    for k in nb.prange(start.shape[0]):
+        counts[k] = _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, dummy, False)
+
+
+@nb.njit(parallel=True, cache=True)
+def tube_fill(start, end, r0, r1, points, lo, h, dims, bstart, order, ptr, out_pt):  # pragma: no cover - compiled
+    """The points of :func:`tube_counts`, segment k's at ``out_pt[ptr[k]:ptr[k + 1]]``."""
+    for k in nb.prange(start.shape[0]):
+        _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, out_pt[ptr[k]:ptr[k + 1]], True)

@@ -274,12 +274,19 @@ def keller_fan(scene: "Scene", dihedron: np.ndarray, t: np.ndarray, incident: np
 
 
 def _first_hits(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: float, eps: float):
-    """(polygon or -1, distance along the unit ``direction`` [m]) of each ray's first hit."""
+    """(polygon or -1, distance along the unit ``direction`` [m]) of each ray's first hit.
+
+    The caster (Embree, float32) names the face; the distance is the float64 intersection
+    with that face's plane, so the reflected rays start on their mirrors."""
     caster = scene.raycaster
-    first = getattr(caster, "first_triangle", None)
-    if first is None:
-        raise WavepathsError("launched candidates need a ray caster with first hits (Embree: pip install embreex)")
-    tri = first(origin + eps * direction, origin + far * direction)
+    hits = getattr(caster, "first_hits", None)
+    if hits is not None:
+        tri = hits(origin + eps * direction, direction, far)
+    else:
+        first = getattr(caster, "first_triangle", None)
+        if first is None:
+            raise WavepathsError("launched candidates need a ray caster with first hits (Embree: pip install embreex)")
+        tri = first(origin + eps * direction, origin + far * direction)
     poly = np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
     hit = np.nonzero(poly >= 0)[0]
     dist = np.full(len(origin), far)
@@ -292,24 +299,68 @@ def _first_hits(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: 
     return poly, dist
 
 
-def _deposit(start, end, r0, r1, points, budget: int = 1 << 26) -> tuple[np.ndarray, np.ndarray]:
+class PointGrid:
+    """Query points bucketed on a uniform grid (cell ``h`` metres), for the compiled tube test.
+
+    Attributes
+    ----------
+    points : (p, 3) float64
+    lo : (3,) float64
+        The grid's lowest corner [m].
+    h : float
+    dims : (3,) int64
+    start : (nx ny nz + 1,) int64
+        CSR pointer of the buckets into ``order``.
+    order : (p,) int64
+        Point rows sorted by bucket.
+    """
+
+    MAX_BUCKETS = 1 << 22
+
+    def __init__(self, points: np.ndarray, h: float | None = None) -> None:
+        self.points = np.ascontiguousarray(points, dtype=np.float64)
+        lo = self.points.min(axis=0) if len(points) else np.zeros(3)
+        hi = self.points.max(axis=0) if len(points) else np.zeros(3)
+        ext = np.maximum(hi - lo, 1e-9)
+        if h is None:
+            # about four points per occupied bucket on a planar grid of receivers
+            h = max(float(np.sqrt(ext[0] * ext[1] / max(len(points), 1) * 4)), 1e-3 * float(ext.max()))
+        h = max(h, float((np.prod(ext) / self.MAX_BUCKETS) ** (1 / 3)))
+        self.lo, self.h = lo, float(h)
+        self.dims = (np.floor(ext / self.h).astype(np.int64) + 1)
+        b = self._bucket(self.points)
+        self.order = np.argsort(b, kind="stable").astype(np.int64)
+        self.start = np.searchsorted(b[self.order], np.arange(int(np.prod(self.dims)) + 1)).astype(np.int64)
+
+    def _bucket(self, x: np.ndarray) -> np.ndarray:
+        i = np.clip(np.floor((x - self.lo) / self.h).astype(np.int64), 0, self.dims - 1)
+        return i[:, 0] + self.dims[0] * (i[:, 1] + self.dims[1] * i[:, 2])
+
+
+def _deposit(start, end, r0, r1, points, grid: PointGrid | None = None,
+             budget: int = 1 << 26) -> tuple[np.ndarray, np.ndarray]:
     """(segment, point) pairs with the point within the segment's tube (radius from r0 at
-    ``start`` to r1 at ``end``, linear in the closest point's parameter)."""
+    ``start`` to r1 at ``end``, linear in the closest point's parameter), each pair once.
+
+    Compiled: a walk along each segment over the buckets of ``grid`` (a :class:`PointGrid`
+    of ``points``, built when not given). numpy: every (segment, point) pair, in chunks
+    (the reference)."""
     from . import kernels
 
+    start, end = np.ascontiguousarray(start, dtype=np.float64), np.ascontiguousarray(end, dtype=np.float64)
+    r0, r1 = np.ascontiguousarray(r0, dtype=np.float64), np.ascontiguousarray(r1, dtype=np.float64)
     if kernels.available():
         from . import _numba_launch
 
-        seg, pt = [], []
-        step = max(1, budget // max(len(points), 1))
-        for s0 in range(0, len(start), step):
-            sl = slice(s0, s0 + step)
-            out = np.zeros((len(start[sl]), len(points)), dtype=np.bool_)
-            _numba_launch.tube_contains(start[sl], end[sl], r0[sl], r1[sl], points, out)
-            i, j = np.nonzero(out)
-            seg.append(i + s0)
-            pt.append(j)
-        return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
+        g = grid if grid is not None else PointGrid(points)
+        args = (start, end, r0, r1, g.points, g.lo, g.h, g.dims, g.start, g.order)
+        counts = np.empty(len(start), np.int64)
+        _numba_launch.tube_counts(*args, counts)
+        ptr = np.zeros(len(start) + 1, np.int64)
+        np.cumsum(counts, out=ptr[1:])
+        pt = np.empty(int(ptr[-1]), np.int64)
+        _numba_launch.tube_fill(*args, ptr, pt)
+        return np.repeat(np.arange(len(start)), counts), pt
     seg, pt = [], []
     step = max(1, budget // max(len(points), 1) // 8)
     for s0 in range(0, len(start), step):
@@ -324,6 +375,16 @@ def _deposit(start, end, r0, r1, points, budget: int = 1 << 26) -> tuple[np.ndar
         seg.append(i + s0)
         pt.append(j)
     return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
+
+
+def _unique_rows(rows: np.ndarray) -> np.ndarray:
+    """The distinct rows of a C-contiguous int64 array (in byte order: a sort of fixed-size
+    records, several times faster than ``np.unique(..., axis=0)``)."""
+    rows = np.ascontiguousarray(rows)
+    if len(rows) == 0:
+        return rows
+    rec = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    return np.unique(rec).view(rows.dtype).reshape(-1, rows.shape[1])
 
 
 def _fan_chunks(samples: EdgeSamples, fan: int, fan_rays: int) -> Iterator[np.ndarray]:
@@ -362,6 +423,9 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
     eps = 1e-6 * scene.diagonal  # rays leave an edge or a mirror: skip the float32 re-hit of their own face
     dphi = 2 * np.pi / options.fan
     width = 4 + 2 * Dmax  # point, order, source, before (D), dihedron, after (D)
+    from . import kernels
+
+    grid = PointGrid(points) if kernels.available() else None
     found = []
     for rows in _fan_chunks(samples, options.fan, options.fan_rays):
         P, V, ext, sb = keller_fan(scene, samples.dihedron[rows], samples.t[rows], samples.incident[rows], options.fan)
@@ -375,13 +439,14 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
         after = np.full((len(si), Dmax), -1, np.int64)
         for b in range(Dmax + 1):
             live = samples.order[sample] + b <= Dmax
-            origin, u, sample, r_edge, grow, travelled, after = (
-                x[live] for x in (origin, u, sample, r_edge, grow, travelled, after))
+            if not live.all():
+                origin, u, sample, r_edge, grow, travelled, after = (
+                    x[live] for x in (origin, u, sample, r_edge, grow, travelled, after))
             if len(origin) == 0:
                 break
             poly, dist = _first_hits(scene, origin, u, far, eps)
             end = origin + dist[:, None] * u
-            seg, pt = _deposit(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points)
+            seg, pt = _deposit(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points, grid)
             if len(seg):
                 s = sample[seg]
                 row = np.empty((len(seg), width), np.int64)
@@ -392,7 +457,7 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
                     samples.chain[s], ((0, 0), (0, Dmax - samples.chain.shape[1])), constant_values=-1)
                 row[:, 3 + Dmax] = samples.dihedron[s]
                 row[:, 4 + Dmax:] = after[seg]
-                found.append(np.unique(row, axis=0))
+                found.append(_unique_rows(row))
             hit = poly >= 0
             if b == Dmax or not hit.any():
                 break
@@ -403,6 +468,6 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
             travelled = travelled[hit] + dist[hit]
             after = after[hit]
             after[:, b] = poly[hit]
-    rows = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, width), np.int64)
+    rows = _unique_rows(np.concatenate(found)) if found else np.zeros((0, width), np.int64)
     return CandidateSequences(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3:3 + Dmax], rows[:, 3 + Dmax],
                               rows[:, 4 + Dmax:])

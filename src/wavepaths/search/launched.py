@@ -28,8 +28,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import kernels
-from .diffraction import _diffraction_candidates, _diffraction_prefilter, _source_frames
-from .end_sides import _EndSide, _edge_frame, _sector_in_table
+from .diffraction import _diffraction_candidates, _diffraction_prefilter
+from .end_sides import _EndSide, _edge_frame, _sector_in_table, _transmitter_side
 from .geometry import mirror_points
 from .images import ImageLevel
 from .launch import EdgeSamples, LaunchOptions, candidate_sequences, edge_samples
@@ -105,7 +105,15 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
     for a in range(Dmax + 1):
         if a >= len(ctx.diffraction_sources):
             break
-        tside, _ = _source_frames(scene, ctx, a)
+        in_a = np.nonzero(seq.order == a)[0]
+        if len(in_a) == 0:
+            continue
+        # the transmitter side of the sources this tile's candidates name (not of all of
+        # them: munich holds 11 M order-2 sources)
+        used, s_local = np.unique(seq.source[in_a], return_inverse=True)
+        local = np.full(len(seq), -1, np.int64)
+        local[in_a] = s_local
+        tside = _transmitter_side(scene, ctx, ctx.levels[a], ctx.diffraction_sources[a].take(used))
         for b in range(Dmax + 1 - a):
             tag = f"diffraction_{a}r_{b}r"
             sel = np.nonzero((seq.order == a) & (nb == b))[0]
@@ -113,7 +121,7 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
                 continue
             stats[f"{tag}_candidates"] += len(sel)
             rx_lv = receiver_images(scene, rx, seq.point[sel], seq.after[sel, :b])
-            s_rows = seq.source[sel]
+            s_rows = local[sel]
             d = seq.dihedron[sel]
             x, y, t = _edge_frame(scene, ctx, rx_lv.last, d)
             sec, width, phi = _sector_in_table(ctx, d, x, y)
