@@ -187,4 +187,50 @@ def test_trace_options_check_the_launched_fields():
         TraceOptions(diffraction_candidates="sampled")
     with pytest.raises(WavepathsError, match="launch_fan"):
         TraceOptions(launch_fan=2)
+    with pytest.raises(WavepathsError, match="reflection_candidates"):
+        TraceOptions(reflection_candidates="rays")
+    with pytest.raises(WavepathsError, match="launch_rays"):
+        TraceOptions(launch_rays=1)
     assert TraceOptions().diffraction_candidates == "exhaustive"
+
+
+def test_launched_reflections_find_the_exhaustive_chains(canyon):
+    """``reflection_candidates="launched"`` at three reflections: the same specular paths as
+    the exhaustive search, at the same vertices; with too few rays some are missed and none
+    is invented."""
+    from wavepaths.search import trace
+
+    scene, _, pts, _ = canyon
+    base = TraceOptions(max_reflections=3, diffraction=False)
+    ex = trace(scene, TX, pts, base)
+    la = trace(scene, TX, pts, base.with_(reflection_candidates="launched", launch_rays=1 << 16))
+    ke, kl = _path_keys(ex), _path_keys(la)
+    assert len(ke) > 150 and ke.keys() == kl.keys()
+    for k, i in ke.items():
+        np.testing.assert_allclose(la.vertices[kl[k]], ex.vertices[i], atol=1e-9)
+    sparse = _path_keys(trace(scene, TX, pts, base.with_(reflection_candidates="launched", launch_rays=64)))
+    assert sparse.keys() < ke.keys()
+
+
+def test_fibonacci_directions_cover_the_sphere_evenly():
+    """Unit vectors; every direction of a random sample has a lattice direction within
+    twice the nominal spacing sqrt(4 pi / n)."""
+    from wavepaths.search.launch import fibonacci_directions
+
+    n = 4096
+    u = fibonacci_directions(n)
+    np.testing.assert_allclose(np.linalg.norm(u, axis=1), 1.0, atol=1e-12)
+    probe = np.random.default_rng(5).normal(size=(2000, 3))
+    probe /= np.linalg.norm(probe, axis=1)[:, None]
+    nearest = np.arccos(np.clip((probe @ u.T).max(axis=1), -1, 1))
+    assert nearest.max() < 2 * np.sqrt(4 * np.pi / n)
+
+
+def test_chain_rows_look_up_chains():
+    from wavepaths.search.launch import chain_rows
+
+    table = np.array([[3, 1], [0, 2], [5, 5], [1, 3]])
+    got = chain_rows(table, np.array([[1, 3], [2, 0], [5, 5], [3, 1]]))
+    assert got.tolist() == [3, -1, 2, 0]
+    with pytest.raises(WavepathsError):
+        chain_rows(np.array([[1, 2], [1, 2]]), np.array([[1, 2]]))

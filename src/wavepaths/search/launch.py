@@ -471,3 +471,90 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
     rows = _unique_rows(np.concatenate(found)) if found else np.zeros((0, width), np.int64)
     return CandidateSequences(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3:3 + Dmax], rows[:, 3 + Dmax],
                               rows[:, 4 + Dmax:])
+
+
+def fibonacci_directions(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere (a Fibonacci lattice: equal-area
+    bands in z, golden-angle steps in azimuth); spacing about ``sqrt(4 pi / n)`` rad."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    phi = np.pi * (1.0 + 5.0**0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def chain_rows(polygons: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """(q,) int64: the row of ``polygons`` (c, k) equal to each row of ``query`` (q, k), -1 if none."""
+    c, k = polygons.shape
+    if len(query) == 0 or c == 0:
+        return np.full(len(query), -1, np.int64)
+    if k == 0:
+        return np.zeros(len(query), np.int64)
+    both = _unique_rows(np.ascontiguousarray(polygons, dtype=np.int64))
+    if len(both) != c:  # one chain per row (a single source): otherwise not a lookup
+        raise WavepathsError("chain_rows needs distinct chains (one transmitter per context)")
+    rec = np.dtype((np.void, 8 * k))
+    table = np.ascontiguousarray(polygons, dtype=np.int64).view(rec).ravel()
+    order = np.argsort(table)
+    q = np.ascontiguousarray(query, dtype=np.int64).view(rec).ravel()
+    pos = np.minimum(np.searchsorted(table[order], q), c - 1)
+    found = table[order][pos] == q
+    return np.where(found, order[pos], -1)
+
+
+def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray, rays: int,
+                                   options: LaunchOptions = LaunchOptions()) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per reflection order ``k`` (index ``k - 1``), the (point, chain row of ``ctx.levels[k]``)
+    pairs that launched transmitter rays carry to ``points``.
+
+    ``rays`` directions from the transmitter (:func:`fibonacci_directions`) are traced through
+    ``max_reflections`` specular reflections; each segment after ``k`` reflections gives its
+    mirror chain to the points within its tube (``radius_factor`` times the rays' angular
+    spacing times the unfolded distance from the transmitter). Chains the context's image
+    tree does not hold (proven hidden) are dropped: the exhaustive search would not test them.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    K = ctx.options.max_reflections
+    out = [(np.zeros(0, np.int64), np.zeros(0, np.int64)) for _ in range(K)]
+    if K == 0 or len(points) == 0:
+        return out
+    if len(ctx.tx) != 1:
+        raise WavepathsError("launched candidates take one transmitter per context")
+    from . import kernels
+
+    grid = PointGrid(points) if kernels.available() else None
+    far = 2.0 * scene.diagonal
+    eps = 1e-6 * scene.diagonal
+    dth = np.sqrt(4.0 * np.pi / rays)
+    grow = options.radius_factor * dth
+    found: list[list[np.ndarray]] = [[] for _ in range(K)]
+    directions = fibonacci_directions(rays)
+    for s0 in range(0, rays, options.fan_rays):
+        u = directions[s0:s0 + options.fan_rays]
+        origin = np.repeat(ctx.tx, len(u), axis=0)
+        travelled = np.zeros(len(u))
+        chain = np.zeros((len(u), 0), np.int64)
+        for k in range(K + 1):
+            poly, dist = _first_hits(scene, origin, u, far, eps)
+            if k >= 1:
+                end = origin + dist[:, None] * u
+                seg, pt = _deposit(origin, end, grow * travelled, grow * (travelled + dist), points, grid)
+                if len(seg):
+                    found[k - 1].append(_unique_rows(np.column_stack([pt, chain[seg]])))
+            hit = poly >= 0
+            if k == K or not hit.any():
+                break
+            n = scene.polygon_normal[poly[hit]]
+            v = u[hit]
+            origin = origin[hit] + dist[hit, None] * v
+            u = v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n
+            travelled = travelled[hit] + dist[hit]
+            chain = np.column_stack([chain[hit], poly[hit]])
+    for k in range(1, K + 1):
+        if not found[k - 1]:
+            continue
+        rows = _unique_rows(np.concatenate(found[k - 1]))
+        c = chain_rows(ctx.levels[k].polygons, rows[:, 1:])
+        ok = c >= 0
+        out[k - 1] = (rows[ok, 0], c[ok])
+    return out

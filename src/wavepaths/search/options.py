@@ -123,6 +123,14 @@ class TraceOptions:
     launch_fan : int
         With ``"launched"``: Keller-cone directions per turn (denser: thinner tubes, fewer
         candidates, more rays).
+    reflection_candidates : str
+        The same choice for the purely specular paths: ``"exhaustive"`` (default: every
+        receiver against every image chain whose beam can reach it), or ``"launched"``:
+        the chains that ``launch_rays`` transmitter rays, reflected, carry to each receiver
+        (:func:`wavepaths.search.launch.reflection_candidates_launched`), back-traced and
+        cast like the others; a mirror the rays miss is missed (one transmitter per context).
+    launch_rays : int
+        With ``reflection_candidates="launched"``: rays from the transmitter.
     """
 
     los: bool = True
@@ -139,6 +147,8 @@ class TraceOptions:
     compiled: bool = True
     diffraction_candidates: str = "exhaustive"
     launch_fan: int = 256
+    reflection_candidates: str = "exhaustive"
+    launch_rays: int = 1 << 21
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "disable_culling", frozenset(self.disable_culling))
@@ -159,6 +169,11 @@ class TraceOptions:
         if self.diffraction_candidates not in ("exhaustive", "launched"):
             raise WavepathsError(f"`diffraction_candidates` must be 'exhaustive' or 'launched', got "
                                  f"{self.diffraction_candidates!r}")
+        if self.reflection_candidates not in ("exhaustive", "launched"):
+            raise WavepathsError(f"`reflection_candidates` must be 'exhaustive' or 'launched', got "
+                                 f"{self.reflection_candidates!r}")
+        if self.launch_rays < 16:
+            raise WavepathsError(f"`launch_rays` must be at least 16, got {self.launch_rays}")
         if self.launch_fan < 4:
             raise WavepathsError(f"`launch_fan` must be at least 4, got {self.launch_fan}")
         if self.rx_batch < 1:

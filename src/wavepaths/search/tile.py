@@ -58,13 +58,15 @@ def los_tile(
 
 
 def reflection_tile(
-    scene: "Scene", ctx: TxContext, order: int, rx: np.ndarray, rx_offset: int, stats: Counter, grazing: np.ndarray
+    scene: "Scene", ctx: TxContext, order: int, rx: np.ndarray, rx_offset: int, stats: Counter, grazing: np.ndarray,
+    pairs=None,
 ) -> list[PathBatch]:
     """Specular paths of one order: image method backwards from each receiver.
 
     Only the (receiver, chain) pairs whose chain's last-leg beam can reach the receiver are
     back-traced (:func:`~wavepaths.search.beams.reflection_candidates`; the others are
-    counted in ``reflection_order_{k}_culled_beam``).
+    counted in ``reflection_order_{k}_culled_beam``), or the pairs given in ``pairs`` (an
+    iterable of ``(receiver rows, chain rows)``: the launched candidates).
     """
     lv = ctx.levels[order]
     c, n = len(lv), len(rx)
@@ -72,8 +74,10 @@ def reflection_tile(
     if c == 0 or n == 0:
         return out
     tag = f"reflection_order_{order}"
-    # (receiver, chain) pairs whose chain's last-leg beam can reach the receiver (beams.py)
-    for ri, ci in reflection_candidates(scene, ctx, order, rx, stats, CANDIDATE_BUDGET):
+    if pairs is None:
+        # (receiver, chain) pairs whose chain's last-leg beam can reach the receiver (beams.py)
+        pairs = reflection_candidates(scene, ctx, order, rx, stats, CANDIDATE_BUDGET)
+    for ri, ci in pairs:
         stats[f"{tag}_candidates"] += len(ri)
         if ctx.options.prune_db is not None:
             # |a| <= lambda / (4 pi |rx - I_k|) for |Gamma| <= 1: drop chains below the tolerance
@@ -167,6 +171,13 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
             batches += _diffraction_part(scene, ctx, rx, rx_offset, stats, grazing, pending)
     if opts.los:
         batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
+    launched = None
+    if opts.reflection_candidates == "launched" and opts.max_reflections >= 1:
+        from .launch import reflection_candidates_launched
+
+        launched = reflection_candidates_launched(scene, ctx, rx, opts.launch_rays)
+        stats["launched_reflection_candidates"] += sum(len(p) for p, _ in launched)
     for k in range(1, opts.max_reflections + 1):
-        batches += reflection_tile(scene, ctx, k, rx, rx_offset, stats, grazing)
+        pairs = None if launched is None else [launched[k - 1]]
+        batches += reflection_tile(scene, ctx, k, rx, rx_offset, stats, grazing, pairs)
     return batches, stats
