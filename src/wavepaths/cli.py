@@ -56,6 +56,8 @@ def _trace_options(args):
         tolerance_db=getattr(args, "tolerance_db", None),
         diffraction_candidates=getattr(args, "diffraction_candidates", "exhaustive"),
         launch_fan=getattr(args, "launch_fan", 256),
+        reflection_candidates=getattr(args, "reflection_candidates", "exhaustive"),
+        launch_rays=getattr(args, "launch_rays", 1 << 21),
     )
 
 
@@ -132,6 +134,11 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
                         "sampled Keller fans carry to each receiver (dense cities; may miss a path)")
     p.add_argument("--launch-fan", type=int, default=256,
                    help="with --diffraction-candidates launched: Keller-cone directions per turn (default 256)")
+    p.add_argument("--reflection-candidates", choices=["exhaustive", "launched"], default="exhaustive",
+                   help="specular candidates: every chain whose beam reaches the receiver (default; complete), or "
+                        "those that transmitter rays carry to it (dense cities; may miss a path)")
+    p.add_argument("--launch-rays", type=int, default=1 << 21,
+                   help="with --reflection-candidates launched: rays from the transmitter (default 2097152)")
 
 
 def _add_field_flags(p: argparse.ArgumentParser) -> None:

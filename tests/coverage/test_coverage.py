@@ -336,3 +336,24 @@ def test_tolerance_db_is_refused_by_trace_and_with_gtd(canyon):
                  settings=IN_PROCESS)
     with pytest.raises(WavepathsError, match="tolerance_db"):
         TraceOptions(tolerance_db=-1.0)
+
+
+def test_a_launched_map_equals_the_exhaustive_map(canyon):
+    """Launched candidates for both the reflections and the diffraction (R2+D2) on the
+    street canyon: every cell's total and per-mechanism path gains and path counts equal the
+    exhaustive map's (the launch finds every path there; its tests are the same exact ones),
+    and the tiles follow the launched rule (as large as one worker allows)."""
+    from wavepaths.coverage.solver import auto_tile_size
+    from wavepaths.search.context import build_tx_context
+
+    grid = PlanarGrid(center=[-17.3, 2.2], size=[96, 50], cell_size=[4, 5], height=1.5)
+    base = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2)
+    launched = base.with_(diffraction_candidates="launched", reflection_candidates="launched", launch_rays=1 << 16)
+    ex = coverage(canyon, [[-60, 0, 10]], grid, base, settings=CoverageOptions(workers=1))
+    la = coverage(canyon, [[-60, 0, 10]], grid, launched, settings=CoverageOptions(workers=1))
+    assert la.metadata["tiles"] == 1
+    np.testing.assert_array_equal(np.nan_to_num(la.num_paths), np.nan_to_num(ex.num_paths))
+    assert np.nansum(ex.num_paths) > 2000
+    np.testing.assert_allclose(la.path_gain_db(), ex.path_gain_db(), rtol=0, atol=1e-9, equal_nan=True)
+    ctx = build_tx_context(canyon, np.array([[-60.0, 0, 10]]), launched)
+    assert auto_tile_size(ctx, 20000, 2) == 8192 and auto_tile_size(ctx, 300, 1) == 300

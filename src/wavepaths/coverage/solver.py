@@ -95,6 +95,11 @@ class CoverageOptions:
 TILE_IMAGE_BUDGET = 1 << 22  # receiver images held by one tile, for the automatic tile size
 
 
+LAUNCHED_TILE_MAX = 8192
+"""Cells per tile at most with launched candidates (about 1,000 candidate sequences per munich
+cell at R2+D2: some 0.5 GB of rows for a tile)."""
+
+
 def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> int:
     """Cells per tile when :attr:`CoverageOptions.tile_size` is ``None``.
 
@@ -105,6 +110,11 @@ def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> in
     :data:`TILE_IMAGE_BUDGET` images: ``clamp(budget / images per receiver, 16, 1024)``.
     With several workers, tiles are also small enough to give each worker two.
     """
+    if ctx.options.diffraction_candidates == "launched" or ctx.options.reflection_candidates == "launched":
+        # launched candidates: no receiver image trees, and every tile traces the fans and rays
+        # again, so the tiles are as large as the workers allow
+        w = 1 if workers == 1 else (workers or default_workers())
+        return int(np.clip(-(-cells // w), 16, LAUNCHED_TILE_MAX))
     per_rx = 1
     if ctx.options.diffraction:
         per_rx += sum(int(ctx.stats.get(f"images_order_{b}", 0)) for b in range(1, ctx.options.diffraction_reflections + 1))

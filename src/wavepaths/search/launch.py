@@ -299,6 +299,87 @@ def _first_hits(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: 
     return poly, dist
 
 
+def _first_hits_past(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: float, eps: float,
+                     skip: np.ndarray, rounds: int = 3):
+    """:func:`_first_hits`, passing through the polygons ``skip`` (k, m) of each ray (-1: none):
+    the faces of the wedge a fan ray leaves, or the mirror a reflected ray leaves. A ray that
+    leaves an edge into the wedge's exterior never meets the wedge's own faces; one that does
+    grazes them within float32 resolution of its start (a ground plane's far edge seen at half
+    a degree), and is cast again from there."""
+    poly, dist = _first_hits(scene, origin, direction, far, eps)
+    for _ in range(rounds):
+        again = np.nonzero((poly[:, None] == skip).any(axis=1) & (poly >= 0))[0]
+        if len(again) == 0:
+            break
+        start = origin[again] + dist[again, None] * direction[again]
+        p2, d2 = _first_hits(scene, start, direction[again], far, eps)
+        poly[again] = p2
+        dist[again] = np.where(p2 >= 0, dist[again] + d2, far)
+    return poly, dist
+
+
+FOOTPRINT_MAX = 4.0
+"""Largest footprint of a ray spacing on a plane, in spacings (a ray at grazing incidence)."""
+
+
+def _adjacency(scene: "Scene") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR over polygons: for each polygon, its (dihedron, other polygon) pairs across its
+    convex edges (the diffracting dihedra: where one face can shadow the other, so a beam can
+    pass beside the corner as a sliver; at a concave corner both faces look into the same
+    space and the rays on either side follow both). Cached on the scene."""
+    got = scene.__dict__.get("_launch_adjacency")
+    if got is None:
+        D = scene.dihedra
+        owner = np.repeat(np.arange(len(D.face_ptr) - 1), np.diff(D.face_ptr))
+        # every ordered pair of distinct faces of one dihedron
+        fa, fb = [], []
+        for j in range(int(np.diff(D.face_ptr).max(initial=0))):
+            for i in range(int(np.diff(D.face_ptr).max(initial=0))):
+                if i == j:
+                    continue
+                ok = np.nonzero(np.diff(D.face_ptr) > max(i, j))[0]
+                fa.append(D.face_ptr[ok] + i)
+                fb.append(D.face_ptr[ok] + j)
+        fa = np.concatenate(fa) if fa else np.zeros(0, np.int64)
+        fb = np.concatenate(fb) if fb else np.zeros(0, np.int64)
+        pa, pb, dd = D.face_polygon[fa], D.face_polygon[fb], owner[fa]
+        keep = (pa != pb) & D.diffracting[dd]
+        pa, pb, dd = pa[keep], pb[keep], dd[keep]
+        o = np.argsort(pa, kind="stable")
+        ptr = np.searchsorted(pa[o], np.arange(scene.num_polygons + 1))
+        got = (ptr, dd[o], pb[o])
+        scene.__dict__["_launch_adjacency"] = got
+    return got
+
+
+def _neighbour_branches(scene: "Scene", poly: np.ndarray, x: np.ndarray, u: np.ndarray, radius: np.ndarray):
+    """Where a ray's tube hit polygon ``poly`` at ``x`` near one of its edges, the polygons
+    across that edge that the rest of the tube may hit instead (a beam that is a sliver beside
+    a corner, which no ray of the fan follows): ``(row, polygon, distance along u to its
+    plane)``. Near means within the footprint of the rays' spacing ``radius`` on the hit
+    plane, ``radius / |u . n|`` (at most ``FOOTPRINT_MAX`` spacings): the beam between this
+    ray and its neighbour straddles the edge."""
+    ptr, dih, other = _adjacency(scene)
+    cnt = ptr[poly + 1] - ptr[poly]
+    row = np.repeat(np.arange(len(poly)), cnt)
+    j = np.repeat(ptr[poly], cnt) + (np.arange(len(row)) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    d, q = dih[j], other[j]
+    D = scene.dihedra
+    cos_i = np.abs(np.einsum("ij,ij->i", u, scene.polygon_normal[poly]))
+    foot = radius * np.minimum(1.0 / np.maximum(cos_i, 1e-12), FOOTPRINT_MAX)
+    v = x[row] - D.origin[d]
+    t = np.clip(np.einsum("ij,ij->i", v, D.direction[d]), 0.0, D.length[d])
+    near = np.einsum("ij,ij->i", v - t[:, None] * D.direction[d], v - t[:, None] * D.direction[d]) <= foot[row] ** 2
+    row, q = row[near], q[near]
+    n = scene.polygon_normal[q]
+    den = np.einsum("ij,ij->i", n, u[row])
+    # the ray's own line, continued (or shortened) to the other polygon's plane, from x
+    num = scene.polygon_offset[q] - np.einsum("ij,ij->i", n, x[row])
+    ok = np.abs(den) > 1e-9
+    row, q, step = row[ok], q[ok], num[ok] / den[ok]
+    return row, q, step
+
+
 class PointGrid:
     """Query points bucketed on a uniform grid (cell ``h`` metres), for the compiled tube test.
 
@@ -437,14 +518,19 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
         grow = options.radius_factor * (sb[si] * dphi + samples.angular[sample])
         travelled = np.zeros(len(si))
         after = np.full((len(si), Dmax), -1, np.int64)
+        D_ = scene.dihedra
+        fp = D_.face_ptr[samples.dihedron[sample]]
+        nf = D_.face_ptr[samples.dihedron[sample] + 1] - fp
+        skip = np.stack([D_.face_polygon[fp], np.where(nf > 1, D_.face_polygon[np.minimum(fp + 1, len(D_.face_polygon) - 1)],
+                                                        -1)], axis=1)
         for b in range(Dmax + 1):
             live = samples.order[sample] + b <= Dmax
             if not live.all():
-                origin, u, sample, r_edge, grow, travelled, after = (
-                    x[live] for x in (origin, u, sample, r_edge, grow, travelled, after))
+                origin, u, sample, r_edge, grow, travelled, after, skip = (
+                    x[live] for x in (origin, u, sample, r_edge, grow, travelled, after, skip))
             if len(origin) == 0:
                 break
-            poly, dist = _first_hits(scene, origin, u, far, eps)
+            poly, dist = _first_hits_past(scene, origin, u, far, eps, skip)
             end = origin + dist[:, None] * u
             seg, pt = _deposit(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points, grid)
             if len(seg):
@@ -461,13 +547,23 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
             hit = poly >= 0
             if b == Dmax or not hit.any():
                 break
-            n = scene.polygon_normal[poly[hit]]
-            v = u[hit]
+            hr = np.nonzero(hit)[0]
+            x = end[hr]
+            at = travelled[hr] + dist[hr]
+            # the reflections, and the branches to the polygons beside the hit (a sliver beam)
+            br, bq, bstep = _neighbour_branches(scene, poly[hr], x, u[hr],
+                                                (r_edge[hr] + grow[hr] * at) / options.radius_factor)
+            sel = np.concatenate([hr, hr[br]])
+            mirror = np.concatenate([poly[hr], bq])
+            origin = np.concatenate([x, x[br] + bstep[:, None] * u[hr[br]]])
+            travelled = np.concatenate([at, np.maximum(at[br] + bstep, 0.0)])
+            n = scene.polygon_normal[mirror]
+            v = u[sel]
             u = v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n
-            origin, sample, r_edge, grow = end[hit], sample[hit], r_edge[hit], grow[hit]
-            travelled = travelled[hit] + dist[hit]
-            after = after[hit]
-            after[:, b] = poly[hit]
+            sample, r_edge, grow = sample[sel], r_edge[sel], grow[sel]
+            after = after[sel]
+            after[:, b] = mirror
+            skip = np.stack([mirror, np.full(len(mirror), -1)], axis=1)  # the mirror just left
     rows = _unique_rows(np.concatenate(found)) if found else np.zeros((0, width), np.int64)
     return CandidateSequences(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3:3 + Dmax], rows[:, 3 + Dmax],
                               rows[:, 4 + Dmax:])
@@ -535,7 +631,10 @@ def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.
         travelled = np.zeros(len(u))
         chain = np.zeros((len(u), 0), np.int64)
         for k in range(K + 1):
-            poly, dist = _first_hits(scene, origin, u, far, eps)
+            if k == 0:
+                poly, dist = _first_hits(scene, origin, u, far, eps)
+            else:
+                poly, dist = _first_hits_past(scene, origin, u, far, eps, chain[:, -1:])
             if k >= 1:
                 end = origin + dist[:, None] * u
                 seg, pt = _deposit(origin, end, grow * travelled, grow * (travelled + dist), points, grid)
@@ -544,12 +643,18 @@ def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.
             hit = poly >= 0
             if k == K or not hit.any():
                 break
-            n = scene.polygon_normal[poly[hit]]
-            v = u[hit]
-            origin = origin[hit] + dist[hit, None] * v
+            hr = np.nonzero(hit)[0]
+            x = origin[hr] + dist[hr, None] * u[hr]
+            at = travelled[hr] + dist[hr]
+            br, bq, bstep = _neighbour_branches(scene, poly[hr], x, u[hr], grow * at / options.radius_factor)
+            sel = np.concatenate([hr, hr[br]])
+            mirror = np.concatenate([poly[hr], bq])
+            origin = np.concatenate([x, x[br] + bstep[:, None] * u[hr[br]]])
+            travelled = np.concatenate([at, np.maximum(at[br] + bstep, 0.0)])
+            n = scene.polygon_normal[mirror]
+            v = u[sel]
             u = v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n
-            travelled = travelled[hit] + dist[hit]
-            chain = np.column_stack([chain[hit], poly[hit]])
+            chain = np.column_stack([chain[sel], mirror])
     for k in range(1, K + 1):
         if not found[k - 1]:
             continue
