@@ -234,3 +234,26 @@ def test_chain_rows_look_up_chains():
     assert got.tolist() == [3, -1, 2, 0]
     with pytest.raises(WavepathsError):
         chain_rows(np.array([[1, 2], [1, 2]]), np.array([[1, 2]]))
+
+
+@pytest.mark.skipif(not kernels.available(), reason="numba not installed (the `fast` extra)")
+def test_compiled_branches_equal_the_numpy_ones(canyon, rng):
+    """Rays from random points to random points of random polygons: the compiled branch
+    kernel gives the numpy reference's (hit, polygon, step) triples; some hits branch."""
+    from wavepaths.search.launch import _neighbour_branches
+
+    scene = canyon[0]
+    k = 3000
+    poly = rng.integers(0, scene.num_polygons, k)
+    tri = scene.vertices[scene.triangles[scene.polygon_tris[scene.polygon_tri_ptr[poly]]]]
+    w = rng.dirichlet(np.ones(3), k)
+    x = np.einsum("kj,kjd->kd", w, tri)
+    origin = rng.uniform(-80, 80, (k, 3))
+    origin[:, 2] = rng.uniform(0, 30, k)
+    u = x - origin
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    radius = rng.uniform(0.1, 8.0, k)
+    got = _neighbour_branches(scene, poly, x, u, radius, origin, compiled=True)
+    ref = _neighbour_branches(scene, poly, x, u, radius, origin, compiled=False)
+    key = lambda r: sorted(zip(r[0].tolist(), r[1].tolist(), np.round(r[2], 9).tolist()))
+    assert key(got) == key(ref) and len(ref[0]) > 50

@@ -120,3 +120,58 @@ def tube_fill(start, end, r0, r1, points, lo, h, dims, bstart, order, ptr, out_p
     """The points of :func:`tube_counts`, segment k's at ``out_pt[ptr[k]:ptr[k + 1]]``."""
     for k in nb.prange(start.shape[0]):
         _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, out_pt[ptr[k]:ptr[k + 1]], True)
+
+
+@nb.njit(cache=True)
+def _branches_of(i, poly, x, u, radius, origin, ptr, dih, other, d_origin, d_dir, d_len, p_normal, p_offset,
+                 p_centre, fmax, out_q, out_step, write):  # pragma: no cover - compiled
+    """The branches of hit i (:func:`wavepaths.search.launch._neighbour_branches`, the same
+    expressions); writes them from index 0 when ``write``; returns how many."""
+    p = poly[i]
+    n0, n1, n2 = p_normal[p, 0], p_normal[p, 1], p_normal[p, 2]
+    cos_i = abs(u[i, 0] * n0 + u[i, 1] * n1 + u[i, 2] * n2)
+    foot = radius[i] * min(1.0 / max(cos_i, 1e-12), fmax)
+    cnt = 0
+    for j in range(ptr[p], ptr[p + 1]):
+        d, q = dih[j], other[j]
+        v0 = x[i, 0] - d_origin[d, 0]
+        v1 = x[i, 1] - d_origin[d, 1]
+        v2 = x[i, 2] - d_origin[d, 2]
+        t = v0 * d_dir[d, 0] + v1 * d_dir[d, 1] + v2 * d_dir[d, 2]
+        t = min(max(t, 0.0), d_len[d])
+        w0 = v0 - t * d_dir[d, 0]
+        w1 = v1 - t * d_dir[d, 1]
+        w2 = v2 - t * d_dir[d, 2]
+        if w0 * w0 + w1 * w1 + w2 * w2 > foot * foot:
+            continue
+        m0, m1, m2, off = p_normal[q, 0], p_normal[q, 1], p_normal[q, 2], p_offset[q]
+        side_o = m0 * origin[i, 0] + m1 * origin[i, 1] + m2 * origin[i, 2] - off
+        side_p = m0 * p_centre[p, 0] + m1 * p_centre[p, 1] + m2 * p_centre[p, 2] - off
+        if side_o * side_p >= 0.0:
+            continue
+        den = m0 * u[i, 0] + m1 * u[i, 1] + m2 * u[i, 2]
+        if abs(den) <= 1e-9:
+            continue
+        if write:
+            out_q[cnt] = q
+            out_step[cnt] = (off - (m0 * x[i, 0] + m1 * x[i, 1] + m2 * x[i, 2])) / den
+        cnt += 1
+    return cnt
+
+
+@nb.njit(parallel=True, cache=True)
+def branch_counts(poly, x, u, radius, origin, ptr, dih, other, d_origin, d_dir, d_len, p_normal, p_offset, p_centre,
+                  fmax, counts):  # pragma: no cover - compiled
+    dq = np.empty(0, np.int64)
+    ds = np.empty(0)
+    for i in nb.prange(poly.shape[0]):
+        counts[i] = _branches_of(i, poly, x, u, radius, origin, ptr, dih, other, d_origin, d_dir, d_len, p_normal,
+                                 p_offset, p_centre, fmax, dq, ds, False)
+
+
+@nb.njit(parallel=True, cache=True)
+def branch_fill(poly, x, u, radius, origin, ptr, dih, other, d_origin, d_dir, d_len, p_normal, p_offset, p_centre,
+                fmax, start, out_q, out_step):  # pragma: no cover - compiled
+    for i in nb.prange(poly.shape[0]):
+        _branches_of(i, poly, x, u, radius, origin, ptr, dih, other, d_origin, d_dir, d_len, p_normal, p_offset,
+                     p_centre, fmax, out_q[start[i]:start[i + 1]], out_step[start[i]:start[i + 1]], True)
