@@ -178,54 +178,65 @@ def edge_samples(scene: "Scene", ctx: "TxContext", options: LaunchOptions = Laun
     -------
     EdgeSamples
     """
-    D = scene.dihedra
     A = max(len(ctx.diffraction_sources) - 1, 0)
     parts = []
     for a, src in enumerate(ctx.diffraction_sources):
-        if len(src.dihedron) == 0:
-            continue
         lv = ctx.levels[a]
-        lo, hi = _windows(scene, src)
-        d = src.dihedron
-        image = lv.images[src.chain, -1]
-        mid = D.origin[d] + (0.5 * (lo + hi))[:, None] * D.direction[d]
-        dist = np.linalg.norm(mid - image, axis=1)
-        spacing = np.maximum(options.spacing, options.angular * dist)
-        count = np.ceil((hi - lo) / spacing).astype(np.int64) + 1
-        row = np.repeat(np.arange(len(d)), count)
-        j = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
-        frac = np.where(count[row] > 1, j / np.maximum(count[row] - 1, 1), 0.5)
-        t = lo[row] + (hi - lo)[row] * frac
-        x = D.origin[d[row]] + t[:, None] * D.direction[d[row]]
-        chain = src.chain[row]
-        lit = np.zeros(len(row), dtype=bool)
-        if a == 0:
-            verts = np.stack([image[row], x], axis=1)
-            lit = ~occluded_chains(scene, verts, _Discard())
-        else:
-            ok, pts, _ = backtrace(scene, x, lv, chain, compiled=ctx.options.compiled)
-            if len(ok):
-                verts = np.concatenate([lv.images[chain[ok], :1], pts, x[ok, None, :]], axis=1)
-                lit[ok] = ~occluded_chains(scene, verts, _Discard())
-        # a sample also stands for its lit neighbours on the same window (a lit stretch
-        # between two samples still starts a fan)
-        same_prev = np.zeros(len(row), dtype=bool)
-        same_prev[1:] = row[1:] == row[:-1]
-        keep = lit.copy()
-        keep[1:] |= lit[:-1] & same_prev[1:]
-        keep[:-1] |= lit[1:] & same_prev[1:]
-        k = np.nonzero(keep)[0]
-        inc = x[k] - image[row[k]]
-        length = np.linalg.norm(inc, axis=1)
-        inc /= np.where(length > 0, length, 1.0)[:, None]
-        pad = np.full((len(k), A), -1, np.int64)
-        pad[:, :a] = lv.polygons[chain[k]]
-        parts.append((np.full(len(k), a, np.int64), row[k], pad, d[row[k]], t[k], inc, spacing[row[k]],
-                      spacing[row[k]] / np.maximum(length, 1e-9)))
+        lo_all, hi_all = _windows(scene, src)
+        # in chunks of pairs: munich's 11 M order-2 pairs hold some 50 M samples
+        for p0 in range(0, len(src.dihedron), SAMPLE_PAIR_CHUNK):
+            pr = np.arange(p0, min(len(src.dihedron), p0 + SAMPLE_PAIR_CHUNK))
+            parts.append(_window_samples(scene, ctx, a, lv, src, pr, lo_all[pr], hi_all[pr], A, options))
     if not parts:
         z = np.zeros(0, np.int64)
         return EdgeSamples(z, z, np.zeros((0, A), np.int64), z, np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
     return EdgeSamples(*(np.concatenate(c) for c in zip(*parts)))
+
+
+SAMPLE_PAIR_CHUNK = 1 << 18
+"""(source, dihedron) pairs sampled at once (a few samples each: bounds the temporaries)."""
+
+
+def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.ndarray, lo: np.ndarray,
+                    hi: np.ndarray, A: int, options: LaunchOptions) -> tuple:
+    """The kept samples of the pairs ``pr`` of ``src`` (order ``a``; see :func:`edge_samples`)."""
+    D = scene.dihedra
+    d = src.dihedron[pr]
+    image = lv.images[src.chain[pr], -1]
+    mid = D.origin[d] + (0.5 * (lo + hi))[:, None] * D.direction[d]
+    dist = np.linalg.norm(mid - image, axis=1)
+    spacing = np.maximum(options.spacing, options.angular * dist)
+    count = np.ceil((hi - lo) / spacing).astype(np.int64) + 1
+    row = np.repeat(np.arange(len(d)), count)
+    j = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
+    frac = np.where(count[row] > 1, j / np.maximum(count[row] - 1, 1), 0.5)
+    t = lo[row] + (hi - lo)[row] * frac
+    x = D.origin[d[row]] + t[:, None] * D.direction[d[row]]
+    chain = src.chain[pr][row]
+    lit = np.zeros(len(row), dtype=bool)
+    if a == 0:
+        verts = np.stack([image[row], x], axis=1)
+        lit = ~occluded_chains(scene, verts, _Discard())
+    else:
+        ok, pts, _ = backtrace(scene, x, lv, chain, compiled=ctx.options.compiled)
+        if len(ok):
+            verts = np.concatenate([lv.images[chain[ok], :1], pts, x[ok, None, :]], axis=1)
+            lit[ok] = ~occluded_chains(scene, verts, _Discard())
+    # a sample also stands for its lit neighbours on the same window (a lit stretch
+    # between two samples still starts a fan)
+    same_prev = np.zeros(len(row), dtype=bool)
+    same_prev[1:] = row[1:] == row[:-1]
+    keep = lit.copy()
+    keep[1:] |= lit[:-1] & same_prev[1:]
+    keep[:-1] |= lit[1:] & same_prev[1:]
+    k = np.nonzero(keep)[0]
+    inc = x[k] - image[row[k]]
+    length = np.linalg.norm(inc, axis=1)
+    inc /= np.where(length > 0, length, 1.0)[:, None]
+    pad = np.full((len(k), A), -1, np.int64)
+    pad[:, :a] = lv.polygons[chain[k]]
+    return (np.full(len(k), a, np.int64), pr[row[k]], pad, d[row[k]], t[k], inc, spacing[row[k]],
+            spacing[row[k]] / np.maximum(length, 1e-9))
 
 
 class _Discard(dict):
