@@ -24,6 +24,9 @@ from .isolated import run_isolated
 
 MUNICH_TX = (8.5, 21.0, 27.0)
 TARGET_S = 600.0
+LAUNCHED_OPTIONS = {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 2,
+                    "diffraction_candidates": "launched", "reflection_candidates": "launched"}
+"""The target's settings with launched candidates (:mod:`wavepaths.search.launch`)."""
 TARGET_BYTES = 8 << 30
 
 
@@ -153,8 +156,12 @@ def munich_sample(progress_file: str, cell_size: float = 2.0, options: dict | No
 def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARGET_BYTES, cell_size: float = 2.0,
                options: dict | None = None, probe: bool = True, probe_timeout_s: float = 900.0,
                progress=print, sample_first: bool = True, sample_timeout_s: float = 900.0,
-               sample_cells: int = 16) -> dict:
+               sample_cells: int = 16, launched_sample: bool = True) -> dict:
     """Run the munich map once in a child process; report how far it got.
+
+    With ``launched_sample`` (and the target's settings), first a sample of the target's
+    settings with launched candidates (:data:`LAUNCHED_OPTIONS`, two tiles of 2,048 cells),
+    reported under ``"launched"``.
 
     With ``sample_first``, a child first builds the transmitter context and traces two strips
     of ``sample_cells`` cells (:func:`munich_sample`, limited to ``sample_timeout_s``; at R2+D2
@@ -171,6 +178,18 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
         return {"skipped": "Sionna RT is not installed (its munich scene ships with it)"}
     os.makedirs(out_dir, exist_ok=True)
     pfile = os.path.join(out_dir, "munich_progress.json")
+    launched = None
+    if launched_sample and options is None:
+        # the target's settings with launched candidates: context, then two tiles of 2,048 cells
+        progress(f"munich: launched candidates, context and two tiles (limit {sample_timeout_s:g} s)")
+        lfile = os.path.join(out_dir, "munich_launched_progress.json")
+        rl = run_isolated("wavepaths.bench.munich", "munich_sample",
+                          {"progress_file": lfile, "cell_size": cell_size, "options": LAUNCHED_OPTIONS,
+                           "cells": 2048},
+                          timeout_s=sample_timeout_s, memory_limit_bytes=memory_limit)
+        launched = dict(rl["result"]) if rl["ok"] else {"error": rl.get("error"), "timed_out": rl.get("timed_out", False)}
+        launched["wall_s"] = rl["wall_s"]
+        launched["options"] = LAUNCHED_OPTIONS
     sample = None
     if sample_first:
         progress(f"munich: context and one tile first (limit {sample_timeout_s:g} s)")
@@ -192,11 +211,11 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
             out = {"options": options or "target (R2+D2)", "target_s": TARGET_S, "target_bytes": TARGET_BYTES,
                    "timeout_s": timeout_s, "memory_limit_bytes": memory_limit, "tx": list(MUNICH_TX),
                    "cell_size_m": cell_size, "finished": False, "meets_target": False, "full_map_skipped": why,
-                   "sample": sample}
+                   "sample": sample, "launched": launched}
             if probe and options is None:
                 progress("munich: probing first order (R1+D0) to see where the scene stands")
                 out["probe"] = run_munich(out_dir, timeout_s=probe_timeout_s, memory_limit=memory_limit,
-                                          cell_size=cell_size, probe=False, progress=progress,
+                                          cell_size=cell_size, probe=False, progress=progress, launched_sample=False,
                                           options={"max_reflections": 1, "diffraction": True,
                                                    "diffraction_reflections": 0},
                                           sample_timeout_s=min(sample_timeout_s, probe_timeout_s))
@@ -214,6 +233,8 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
            "finished": bool(r["ok"]), "wall_s": r["wall_s"], "last_progress": state}
     if sample is not None:
         out["sample"] = sample
+    if launched is not None:
+        out["launched"] = launched
     if r["ok"]:
         out.update(r["result"])
         out["max_rss_bytes"] = r["max_rss_bytes"]
@@ -230,6 +251,6 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
         if probe and options is None:
             progress("munich: the target settings failed; probing first order (R1+D0) to see where the scene stands")
             out["probe"] = run_munich(out_dir, timeout_s=probe_timeout_s, memory_limit=memory_limit,
-                                      cell_size=cell_size, probe=False, progress=progress,
+                                      cell_size=cell_size, probe=False, progress=progress, launched_sample=False,
                                       options={"max_reflections": 1, "diffraction": True, "diffraction_reflections": 0})
     return out
