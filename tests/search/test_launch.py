@@ -11,9 +11,8 @@ from wavepaths.errors import WavepathsError
 from wavepaths.scene import load_scene
 from wavepaths.search import TraceOptions, kernels
 from wavepaths.search.context import build_tx_context
-from wavepaths.search.launch import (
-    LaunchOptions, _deposit, candidate_sequences, edge_samples, keller_fan,
-)
+from wavepaths.search.launch import LaunchOptions, candidate_sequences, edge_samples, keller_fan
+from wavepaths.search.tubes import tube_pairs as _deposit
 from wavepaths.search.paths import InteractionType
 from wavepaths.search.tile import trace_tile
 
@@ -215,7 +214,7 @@ def test_launched_reflections_find_the_exhaustive_chains(canyon):
 def test_fibonacci_directions_cover_the_sphere_evenly():
     """Unit vectors; every direction of a random sample has a lattice direction within
     twice the nominal spacing sqrt(4 pi / n)."""
-    from wavepaths.search.launch import fibonacci_directions
+    from wavepaths.search.rays import fibonacci_directions
 
     n = 4096
     u = fibonacci_directions(n)
@@ -240,7 +239,7 @@ def test_chain_rows_look_up_chains():
 def test_compiled_branches_equal_the_numpy_ones(canyon, rng):
     """Rays from random points to random points of random polygons: the compiled branch
     kernel gives the numpy reference's (hit, polygon, step) triples; some hits branch."""
-    from wavepaths.search.launch import _neighbour_branches
+    from wavepaths.search.rays import neighbour_branches as _neighbour_branches
 
     scene = canyon[0]
     k = 3000

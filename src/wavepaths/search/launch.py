@@ -42,6 +42,8 @@ import numpy as np
 from ..errors import WavepathsError
 from .chains import occluded_chains
 from .images import backtrace
+from .rays import fibonacci_directions, first_hits, first_hits_past, neighbour_branches
+from .tubes import PointGrid, tube_pairs, unique_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -284,230 +286,6 @@ def keller_fan(scene: "Scene", dihedron: np.ndarray, t: np.ndarray, incident: np
     return point, direction, ~interior, sb
 
 
-def _first_hits(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: float, eps: float):
-    """(polygon or -1, distance along the unit ``direction`` [m]) of each ray's first hit.
-
-    The caster (Embree, float32) names the face; the distance is the float64 intersection
-    with that face's plane, so the reflected rays start on their mirrors."""
-    caster = scene.raycaster
-    hits = getattr(caster, "first_hits", None)
-    if hits is not None:
-        tri = hits(origin + eps * direction, direction, far)
-    else:
-        first = getattr(caster, "first_triangle", None)
-        if first is None:
-            raise WavepathsError("launched candidates need a ray caster with first hits (Embree: pip install embreex)")
-        tri = first(origin + eps * direction, origin + far * direction)
-    poly = np.where(tri >= 0, scene.triangle_polygon[np.maximum(tri, 0)], -1)
-    hit = np.nonzero(poly >= 0)[0]
-    dist = np.full(len(origin), far)
-    n = scene.polygon_normal[poly[hit]]
-    den = np.einsum("ij,ij->i", n, direction[hit])
-    num = scene.polygon_offset[poly[hit]] - np.einsum("ij,ij->i", n, origin[hit])
-    ok = np.abs(den) > 1e-12
-    dist[hit[ok]] = num[ok] / den[ok]
-    poly[hit[~ok]] = -1  # a graze along the plane: no reflection
-    return poly, dist
-
-
-def _first_hits_past(scene: "Scene", origin: np.ndarray, direction: np.ndarray, far: float, eps: float,
-                     skip: np.ndarray, rounds: int = 3):
-    """:func:`_first_hits`, passing through the polygons ``skip`` (k, m) of each ray (-1: none):
-    the faces of the wedge a fan ray leaves, or the mirror a reflected ray leaves. A ray that
-    leaves an edge into the wedge's exterior never meets the wedge's own faces; one that does
-    grazes them within float32 resolution of its start (a ground plane's far edge seen at half
-    a degree), and is cast again from there."""
-    poly, dist = _first_hits(scene, origin, direction, far, eps)
-    for _ in range(rounds):
-        again = np.nonzero((poly[:, None] == skip).any(axis=1) & (poly >= 0))[0]
-        if len(again) == 0:
-            break
-        start = origin[again] + dist[again, None] * direction[again]
-        p2, d2 = _first_hits(scene, start, direction[again], far, eps)
-        poly[again] = p2
-        dist[again] = np.where(p2 >= 0, dist[again] + d2, far)
-    return poly, dist
-
-
-FOOTPRINT_MAX = 2.0
-"""Largest footprint of the rays' spacing on a plane, in spacings (grazing incidence)."""
-
-
-def _adjacency(scene: "Scene") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """CSR over polygons: for each polygon, its (dihedron, other polygon) pairs across its
-    convex edges (the diffracting dihedra: where one face can shadow the other, so a beam can
-    pass beside the corner as a sliver; at a concave corner both faces look into the same
-    space and the rays on either side follow both). Cached on the scene."""
-    got = scene.__dict__.get("_launch_adjacency")
-    if got is None:
-        D = scene.dihedra
-        owner = np.repeat(np.arange(len(D.face_ptr) - 1), np.diff(D.face_ptr))
-        # every ordered pair of distinct faces of one dihedron
-        fa, fb = [], []
-        for j in range(int(np.diff(D.face_ptr).max(initial=0))):
-            for i in range(int(np.diff(D.face_ptr).max(initial=0))):
-                if i == j:
-                    continue
-                ok = np.nonzero(np.diff(D.face_ptr) > max(i, j))[0]
-                fa.append(D.face_ptr[ok] + i)
-                fb.append(D.face_ptr[ok] + j)
-        fa = np.concatenate(fa) if fa else np.zeros(0, np.int64)
-        fb = np.concatenate(fb) if fb else np.zeros(0, np.int64)
-        pa, pb, dd = D.face_polygon[fa], D.face_polygon[fb], owner[fa]
-        keep = (pa != pb) & D.diffracting[dd]
-        pa, pb, dd = pa[keep], pb[keep], dd[keep]
-        o = np.argsort(pa, kind="stable")
-        ptr = np.searchsorted(pa[o], np.arange(scene.num_polygons + 1))
-        got = (ptr, dd[o], pb[o])
-        scene.__dict__["_launch_adjacency"] = got
-    return got
-
-
-def _neighbour_branches(scene: "Scene", poly: np.ndarray, x: np.ndarray, u: np.ndarray, radius: np.ndarray,
-                        origin: np.ndarray, compiled: bool = True):
-    """Where a ray's tube hit polygon ``poly`` at ``x`` near one of its edges, the polygons
-    across that edge that the rest of the tube may hit instead (a beam that is a sliver beside
-    a corner, which no ray of the fan follows): ``(row, polygon, distance along u to its
-    plane)``. Near means within the footprint of the rays' spacing ``radius`` on the hit
-    plane, ``radius / |u . n|``, at most ``FOOTPRINT_MAX`` spacings: the beam between this
-    ray and its neighbour may straddle the edge. (A cap of 4 branched almost every hit of
-    munich's fans, 7x the candidates; without the factor, one D-R path of the street canyon
-    is missed at 1,024 directions per turn.)"""
-    ptr, dih, other = _adjacency(scene)
-    from . import kernels
-
-    if compiled and kernels.available():
-        from . import _numba_launch
-
-        D = scene.dihedra
-        c = np.ascontiguousarray
-        args = (c(poly, dtype=np.int64), c(x, dtype=np.float64), c(u, dtype=np.float64), c(radius, dtype=np.float64),
-                c(origin, dtype=np.float64), ptr, dih, other, D.origin, D.direction, D.length, scene.polygon_normal,
-                scene.polygon_offset, c(scene.polygon_spheres[0]), float(FOOTPRINT_MAX))
-        counts = np.empty(len(poly), np.int64)
-        _numba_launch.branch_counts(*args, counts)
-        start = np.zeros(len(poly) + 1, np.int64)
-        np.cumsum(counts, out=start[1:])
-        q, step = np.empty(int(start[-1]), np.int64), np.empty(int(start[-1]))
-        _numba_launch.branch_fill(*args, start, q, step)
-        return np.repeat(np.arange(len(poly)), counts), q, step
-    cnt = ptr[poly + 1] - ptr[poly]
-    row = np.repeat(np.arange(len(poly)), cnt)
-    j = np.repeat(ptr[poly], cnt) + (np.arange(len(row)) - np.repeat(np.cumsum(cnt) - cnt, cnt))
-    d, q = dih[j], other[j]
-    D = scene.dihedra
-    cos_i = np.abs(np.einsum("ij,ij->i", u, scene.polygon_normal[poly]))
-    foot = radius * np.minimum(1.0 / np.maximum(cos_i, 1e-12), FOOTPRINT_MAX)
-    v = x[row] - D.origin[d]
-    t = np.clip(np.einsum("ij,ij->i", v, D.direction[d]), 0.0, D.length[d])
-    near = np.einsum("ij,ij->i", v - t[:, None] * D.direction[d], v - t[:, None] * D.direction[d]) <= foot[row] ** 2
-    row, q = row[near], q[near]
-    # only where the ray comes from the front of the polygon beyond the edge: its origin and
-    # the polygon hit lie on opposite sides of that polygon's plane (a convex corner seen
-    # from outside); otherwise no neighbouring ray can reach its front
-    n = scene.polygon_normal[q]
-    off = scene.polygon_offset[q]
-    centre = scene.polygon_spheres[0][poly[row]]
-    side_o = np.einsum("ij,ij->i", n, origin[row]) - off
-    side_p = np.einsum("ij,ij->i", n, centre) - off
-    front = side_o * side_p < 0
-    row, q, n = row[front], q[front], n[front]
-    den = np.einsum("ij,ij->i", n, u[row])
-    # the ray's own line, continued (or shortened) to the other polygon's plane, from x
-    num = scene.polygon_offset[q] - np.einsum("ij,ij->i", n, x[row])
-    ok = np.abs(den) > 1e-9
-    row, q, step = row[ok], q[ok], num[ok] / den[ok]
-    return row, q, step
-
-
-class PointGrid:
-    """Query points bucketed on a uniform grid (cell ``h`` metres), for the compiled tube test.
-
-    Attributes
-    ----------
-    points : (p, 3) float64
-    lo : (3,) float64
-        The grid's lowest corner [m].
-    h : float
-    dims : (3,) int64
-    start : (nx ny nz + 1,) int64
-        CSR pointer of the buckets into ``order``.
-    order : (p,) int64
-        Point rows sorted by bucket.
-    """
-
-    MAX_BUCKETS = 1 << 22
-
-    def __init__(self, points: np.ndarray, h: float | None = None) -> None:
-        self.points = np.ascontiguousarray(points, dtype=np.float64)
-        lo = self.points.min(axis=0) if len(points) else np.zeros(3)
-        hi = self.points.max(axis=0) if len(points) else np.zeros(3)
-        ext = np.maximum(hi - lo, 1e-9)
-        if h is None:
-            # about four points per occupied bucket on a planar grid of receivers
-            h = max(float(np.sqrt(ext[0] * ext[1] / max(len(points), 1) * 4)), 1e-3 * float(ext.max()))
-        h = max(h, float((np.prod(ext) / self.MAX_BUCKETS) ** (1 / 3)))
-        self.lo, self.h = lo, float(h)
-        self.dims = (np.floor(ext / self.h).astype(np.int64) + 1)
-        b = self._bucket(self.points)
-        self.order = np.argsort(b, kind="stable").astype(np.int64)
-        self.start = np.searchsorted(b[self.order], np.arange(int(np.prod(self.dims)) + 1)).astype(np.int64)
-
-    def _bucket(self, x: np.ndarray) -> np.ndarray:
-        i = np.clip(np.floor((x - self.lo) / self.h).astype(np.int64), 0, self.dims - 1)
-        return i[:, 0] + self.dims[0] * (i[:, 1] + self.dims[1] * i[:, 2])
-
-
-def _deposit(start, end, r0, r1, points, grid: PointGrid | None = None,
-             budget: int = 1 << 26) -> tuple[np.ndarray, np.ndarray]:
-    """(segment, point) pairs with the point within the segment's tube (radius from r0 at
-    ``start`` to r1 at ``end``, linear in the closest point's parameter), each pair once.
-
-    Compiled: a walk along each segment over the buckets of ``grid`` (a :class:`PointGrid`
-    of ``points``, built when not given). numpy: every (segment, point) pair, in chunks
-    (the reference)."""
-    from . import kernels
-
-    start, end = np.ascontiguousarray(start, dtype=np.float64), np.ascontiguousarray(end, dtype=np.float64)
-    r0, r1 = np.ascontiguousarray(r0, dtype=np.float64), np.ascontiguousarray(r1, dtype=np.float64)
-    if kernels.available():
-        from . import _numba_launch
-
-        g = grid if grid is not None else PointGrid(points)
-        args = (start, end, r0, r1, g.points, g.lo, g.h, g.dims, g.start, g.order)
-        counts = np.empty(len(start), np.int64)
-        _numba_launch.tube_counts(*args, counts)
-        ptr = np.zeros(len(start) + 1, np.int64)
-        np.cumsum(counts, out=ptr[1:])
-        pt = np.empty(int(ptr[-1]), np.int64)
-        _numba_launch.tube_fill(*args, ptr, pt)
-        return np.repeat(np.arange(len(start)), counts), pt
-    seg, pt = [], []
-    step = max(1, budget // max(len(points), 1) // 8)
-    for s0 in range(0, len(start), step):
-        S, E = start[s0:s0 + step], end[s0:s0 + step]
-        d = E - S
-        L2 = np.einsum("ij,ij->i", d, d)
-        p = points[None, :, :] - S[:, None, :]
-        u = np.clip(np.einsum("kpj,kj->kp", p, d) / np.where(L2 > 0, L2, 1.0)[:, None], 0.0, 1.0)
-        q = p - u[..., None] * d[:, None, :]
-        r = r0[s0:s0 + step, None] + u * (r1 - r0)[s0:s0 + step, None]
-        i, j = np.nonzero(np.einsum("kpj,kpj->kp", q, q) <= r * r)
-        seg.append(i + s0)
-        pt.append(j)
-    return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
-
-
-def _unique_rows(rows: np.ndarray) -> np.ndarray:
-    """The distinct rows of a C-contiguous int64 array (in byte order: a sort of fixed-size
-    records, several times faster than ``np.unique(..., axis=0)``)."""
-    rows = np.ascontiguousarray(rows)
-    if len(rows) == 0:
-        return rows
-    rec = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
-    return np.unique(rec).view(rows.dtype).reshape(-1, rows.shape[1])
-
-
 def _fan_chunks(samples: EdgeSamples, fan: int, fan_rays: int) -> Iterator[np.ndarray]:
     step = max(1, fan_rays // fan)
     for s0 in range(0, len(samples), step):
@@ -570,9 +348,9 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
                     x[live] for x in (origin, u, sample, r_edge, grow, travelled, after, skip))
             if len(origin) == 0:
                 break
-            poly, dist = _first_hits_past(scene, origin, u, far, eps, skip)
+            poly, dist = first_hits_past(scene, origin, u, far, eps, skip)
             end = origin + dist[:, None] * u
-            seg, pt = _deposit(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points, grid)
+            seg, pt = tube_pairs(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points, grid)
             if len(seg):
                 s = sample[seg]
                 row = np.empty((len(seg), width), np.int64)
@@ -583,7 +361,7 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
                     samples.chain[s], ((0, 0), (0, Dmax - samples.chain.shape[1])), constant_values=-1)
                 row[:, 3 + Dmax] = samples.dihedron[s]
                 row[:, 4 + Dmax:] = after[seg]
-                found.append(_unique_rows(row))
+                found.append(unique_rows(row))
             hit = poly >= 0
             if b == Dmax or not hit.any():
                 break
@@ -591,7 +369,7 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
             x = end[hr]
             at = travelled[hr] + dist[hr]
             # the reflections, and the branches to the polygons beside the hit (a sliver beam)
-            br, bq, bstep = _neighbour_branches(scene, poly[hr], x, u[hr],
+            br, bq, bstep = neighbour_branches(scene, poly[hr], x, u[hr],
                                                 (r_edge[hr] + grow[hr] * at) / options.radius_factor, origin[hr])
             sel = np.concatenate([hr, hr[br]])
             mirror = np.concatenate([poly[hr], bq])
@@ -604,19 +382,9 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
             after = after[sel]
             after[:, b] = mirror
             skip = np.stack([mirror, np.full(len(mirror), -1)], axis=1)  # the mirror just left
-    rows = _unique_rows(np.concatenate(found)) if found else np.zeros((0, width), np.int64)
+    rows = unique_rows(np.concatenate(found)) if found else np.zeros((0, width), np.int64)
     return CandidateSequences(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3:3 + Dmax], rows[:, 3 + Dmax],
                               rows[:, 4 + Dmax:])
-
-
-def fibonacci_directions(n: int) -> np.ndarray:
-    """(n, 3) unit vectors spread evenly over the sphere (a Fibonacci lattice: equal-area
-    bands in z, golden-angle steps in azimuth); spacing about ``sqrt(4 pi / n)`` rad."""
-    i = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * i / n
-    r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
-    phi = np.pi * (1.0 + 5.0**0.5) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
 def chain_rows(polygons: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -626,7 +394,7 @@ def chain_rows(polygons: np.ndarray, query: np.ndarray) -> np.ndarray:
         return np.full(len(query), -1, np.int64)
     if k == 0:
         return np.zeros(len(query), np.int64)
-    both = _unique_rows(np.ascontiguousarray(polygons, dtype=np.int64))
+    both = unique_rows(np.ascontiguousarray(polygons, dtype=np.int64))
     if len(both) != c:  # one chain per row (a single source): otherwise not a lookup
         raise WavepathsError("chain_rows needs distinct chains (one transmitter per context)")
     rec = np.dtype((np.void, 8 * k))
@@ -672,21 +440,21 @@ def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.
         chain = np.zeros((len(u), 0), np.int64)
         for k in range(K + 1):
             if k == 0:
-                poly, dist = _first_hits(scene, origin, u, far, eps)
+                poly, dist = first_hits(scene, origin, u, far, eps)
             else:
-                poly, dist = _first_hits_past(scene, origin, u, far, eps, chain[:, -1:])
+                poly, dist = first_hits_past(scene, origin, u, far, eps, chain[:, -1:])
             if k >= 1:
                 end = origin + dist[:, None] * u
-                seg, pt = _deposit(origin, end, grow * travelled, grow * (travelled + dist), points, grid)
+                seg, pt = tube_pairs(origin, end, grow * travelled, grow * (travelled + dist), points, grid)
                 if len(seg):
-                    found[k - 1].append(_unique_rows(np.column_stack([pt, chain[seg]])))
+                    found[k - 1].append(unique_rows(np.column_stack([pt, chain[seg]])))
             hit = poly >= 0
             if k == K or not hit.any():
                 break
             hr = np.nonzero(hit)[0]
             x = origin[hr] + dist[hr, None] * u[hr]
             at = travelled[hr] + dist[hr]
-            br, bq, bstep = _neighbour_branches(scene, poly[hr], x, u[hr], grow * at / options.radius_factor,
+            br, bq, bstep = neighbour_branches(scene, poly[hr], x, u[hr], grow * at / options.radius_factor,
                                                 origin[hr])
             sel = np.concatenate([hr, hr[br]])
             mirror = np.concatenate([poly[hr], bq])
@@ -699,7 +467,7 @@ def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.
     for k in range(1, K + 1):
         if not found[k - 1]:
             continue
-        rows = _unique_rows(np.concatenate(found[k - 1]))
+        rows = unique_rows(np.concatenate(found[k - 1]))
         c = chain_rows(ctx.levels[k].polygons, rows[:, 1:])
         ok = c >= 0
         out[k - 1] = (rows[ok, 0], c[ok])

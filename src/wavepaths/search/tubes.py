@@ -1,0 +1,94 @@
+"""Tubes around launched rays (:mod:`wavepaths.search.launch`): which query points lie
+within each segment's tube, each pair once, through a bucket grid of the points."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class PointGrid:
+    """Query points bucketed on a uniform grid (cell ``h`` metres), for the compiled tube test.
+
+    Attributes
+    ----------
+    points : (p, 3) float64
+    lo : (3,) float64
+        The grid's lowest corner [m].
+    h : float
+    dims : (3,) int64
+    start : (nx ny nz + 1,) int64
+        CSR pointer of the buckets into ``order``.
+    order : (p,) int64
+        Point rows sorted by bucket.
+    """
+
+    MAX_BUCKETS = 1 << 22
+
+    def __init__(self, points: np.ndarray, h: float | None = None) -> None:
+        self.points = np.ascontiguousarray(points, dtype=np.float64)
+        lo = self.points.min(axis=0) if len(points) else np.zeros(3)
+        hi = self.points.max(axis=0) if len(points) else np.zeros(3)
+        ext = np.maximum(hi - lo, 1e-9)
+        if h is None:
+            # about four points per occupied bucket on a planar grid of receivers
+            h = max(float(np.sqrt(ext[0] * ext[1] / max(len(points), 1) * 4)), 1e-3 * float(ext.max()))
+        h = max(h, float((np.prod(ext) / self.MAX_BUCKETS) ** (1 / 3)))
+        self.lo, self.h = lo, float(h)
+        self.dims = (np.floor(ext / self.h).astype(np.int64) + 1)
+        b = self._bucket(self.points)
+        self.order = np.argsort(b, kind="stable").astype(np.int64)
+        self.start = np.searchsorted(b[self.order], np.arange(int(np.prod(self.dims)) + 1)).astype(np.int64)
+
+    def _bucket(self, x: np.ndarray) -> np.ndarray:
+        i = np.clip(np.floor((x - self.lo) / self.h).astype(np.int64), 0, self.dims - 1)
+        return i[:, 0] + self.dims[0] * (i[:, 1] + self.dims[1] * i[:, 2])
+
+
+def tube_pairs(start, end, r0, r1, points, grid: PointGrid | None = None,
+             budget: int = 1 << 26) -> tuple[np.ndarray, np.ndarray]:
+    """(segment, point) pairs with the point within the segment's tube (radius from r0 at
+    ``start`` to r1 at ``end``, linear in the closest point's parameter), each pair once.
+
+    Compiled: a walk along each segment over the buckets of ``grid`` (a :class:`PointGrid`
+    of ``points``, built when not given). numpy: every (segment, point) pair, in chunks
+    (the reference)."""
+    from . import kernels
+
+    start, end = np.ascontiguousarray(start, dtype=np.float64), np.ascontiguousarray(end, dtype=np.float64)
+    r0, r1 = np.ascontiguousarray(r0, dtype=np.float64), np.ascontiguousarray(r1, dtype=np.float64)
+    if kernels.available():
+        from . import _numba_launch
+
+        g = grid if grid is not None else PointGrid(points)
+        args = (start, end, r0, r1, g.points, g.lo, g.h, g.dims, g.start, g.order)
+        counts = np.empty(len(start), np.int64)
+        _numba_launch.tube_counts(*args, counts)
+        ptr = np.zeros(len(start) + 1, np.int64)
+        np.cumsum(counts, out=ptr[1:])
+        pt = np.empty(int(ptr[-1]), np.int64)
+        _numba_launch.tube_fill(*args, ptr, pt)
+        return np.repeat(np.arange(len(start)), counts), pt
+    seg, pt = [], []
+    step = max(1, budget // max(len(points), 1) // 8)
+    for s0 in range(0, len(start), step):
+        S, E = start[s0:s0 + step], end[s0:s0 + step]
+        d = E - S
+        L2 = np.einsum("ij,ij->i", d, d)
+        p = points[None, :, :] - S[:, None, :]
+        u = np.clip(np.einsum("kpj,kj->kp", p, d) / np.where(L2 > 0, L2, 1.0)[:, None], 0.0, 1.0)
+        q = p - u[..., None] * d[:, None, :]
+        r = r0[s0:s0 + step, None] + u * (r1 - r0)[s0:s0 + step, None]
+        i, j = np.nonzero(np.einsum("kpj,kpj->kp", q, q) <= r * r)
+        seg.append(i + s0)
+        pt.append(j)
+    return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
+
+
+def unique_rows(rows: np.ndarray) -> np.ndarray:
+    """The distinct rows of a C-contiguous int64 array (in byte order: a sort of fixed-size
+    records, several times faster than ``np.unique(..., axis=0)``)."""
+    rows = np.ascontiguousarray(rows)
+    if len(rows) == 0:
+        return rows
+    rec = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    return np.unique(rec).view(rows.dtype).reshape(-1, rows.shape[1])
