@@ -356,4 +356,4 @@ def test_a_launched_map_equals_the_exhaustive_map(canyon):
     assert np.nansum(ex.num_paths) > 2000
     np.testing.assert_allclose(la.path_gain_db(), ex.path_gain_db(), rtol=0, atol=1e-9, equal_nan=True)
     ctx = build_tx_context(canyon, np.array([[-60.0, 0, 10]]), launched)
-    assert auto_tile_size(ctx, 20000, 2) == 8192 and auto_tile_size(ctx, 300, 1) == 300
+    assert auto_tile_size(ctx, 20000, 2) == 2048 and auto_tile_size(ctx, 300, 1) == 300

@@ -95,9 +95,10 @@ class CoverageOptions:
 TILE_IMAGE_BUDGET = 1 << 22  # receiver images held by one tile, for the automatic tile size
 
 
-LAUNCHED_TILE_MAX = 8192
-"""Cells per tile at most with launched candidates (about 1,000 candidate sequences per munich
-cell at R2+D2: some 0.5 GB of rows for a tile)."""
+LAUNCHED_TILE_MAX = 2048
+"""Cells per tile at most with launched candidates: munich at R2+D2 carries about 3,000
+candidate sequences per cell (80 bytes each), and a 2,048-cell tile peaked at 3.8 GB with
+the context (docs/benchmarks.md, sixteenth session)."""
 
 
 def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> int:
