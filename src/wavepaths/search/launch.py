@@ -34,6 +34,7 @@ the street canyon by ``tests/search/test_launch.py`` and on munich by
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Iterator
 
@@ -42,7 +43,7 @@ import numpy as np
 from ..errors import WavepathsError
 from .chains import occluded_chains
 from .images import backtrace
-from .rays import fibonacci_directions, first_hits, first_hits_past, neighbour_branches
+from .rays import fibonacci_directions, first_hits, first_hits_past, reflect_and_branch
 from .tubes import PointGrid, tube_pairs, unique_rows
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -218,12 +219,12 @@ def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.nd
     lit = np.zeros(len(row), dtype=bool)
     if a == 0:
         verts = np.stack([image[row], x], axis=1)
-        lit = ~occluded_chains(scene, verts, _Discard())
+        lit = ~occluded_chains(scene, verts, Counter())
     else:
         ok, pts, _ = backtrace(scene, x, lv, chain, compiled=ctx.options.compiled)
         if len(ok):
             verts = np.concatenate([lv.images[chain[ok], :1], pts, x[ok, None, :]], axis=1)
-            lit[ok] = ~occluded_chains(scene, verts, _Discard())
+            lit[ok] = ~occluded_chains(scene, verts, Counter())
     # a sample also stands for its lit neighbours on the same window (a lit stretch
     # between two samples still starts a fan)
     same_prev = np.zeros(len(row), dtype=bool)
@@ -241,10 +242,7 @@ def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.nd
             spacing[row[k]] / np.maximum(length, 1e-9))
 
 
-class _Discard(dict):
-    """A stats sink (the casts of the sampling are not the engine's)."""
-
-    def __missing__(self, key):
+def __missing__(self, key):
         return 0
 
 
@@ -365,19 +363,8 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
             hit = poly >= 0
             if b == Dmax or not hit.any():
                 break
-            hr = np.nonzero(hit)[0]
-            x = end[hr]
-            at = travelled[hr] + dist[hr]
-            # the reflections, and the branches to the polygons beside the hit (a sliver beam)
-            br, bq, bstep = neighbour_branches(scene, poly[hr], x, u[hr],
-                                                (r_edge[hr] + grow[hr] * at) / options.radius_factor, origin[hr])
-            sel = np.concatenate([hr, hr[br]])
-            mirror = np.concatenate([poly[hr], bq])
-            origin = np.concatenate([x, x[br] + bstep[:, None] * u[hr[br]]])
-            travelled = np.concatenate([at, np.maximum(at[br] + bstep, 0.0)])
-            n = scene.polygon_normal[mirror]
-            v = u[sel]
-            u = v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n
+            sel, mirror, origin, u, travelled = reflect_and_branch(scene, origin, u, poly, dist, travelled,
+                                                                   r_edge, grow, options.radius_factor)
             sample, r_edge, grow = sample[sel], r_edge[sel], grow[sel]
             after = after[sel]
             after[:, b] = mirror
@@ -451,18 +438,8 @@ def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.
             hit = poly >= 0
             if k == K or not hit.any():
                 break
-            hr = np.nonzero(hit)[0]
-            x = origin[hr] + dist[hr, None] * u[hr]
-            at = travelled[hr] + dist[hr]
-            br, bq, bstep = neighbour_branches(scene, poly[hr], x, u[hr], grow * at / options.radius_factor,
-                                                origin[hr])
-            sel = np.concatenate([hr, hr[br]])
-            mirror = np.concatenate([poly[hr], bq])
-            origin = np.concatenate([x, x[br] + bstep[:, None] * u[hr[br]]])
-            travelled = np.concatenate([at, np.maximum(at[br] + bstep, 0.0)])
-            n = scene.polygon_normal[mirror]
-            v = u[sel]
-            u = v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n
+            sel, mirror, origin, u, travelled = reflect_and_branch(scene, origin, u, poly, dist, travelled,
+                                                                   0.0, grow, options.radius_factor)
             chain = np.column_stack([chain[sel], mirror])
     for k in range(1, K + 1):
         if not found[k - 1]:

@@ -158,3 +158,28 @@ def neighbour_branches(scene: "Scene", poly: np.ndarray, x: np.ndarray, u: np.nd
     ok = np.abs(den) > 1e-9
     row, q, step = row[ok], q[ok], num[ok] / den[ok]
     return row, q, step
+
+
+def reflect_and_branch(scene: "Scene", origin: np.ndarray, u: np.ndarray, poly: np.ndarray, dist: np.ndarray,
+                       travelled: np.ndarray, spacing_base, spacing_slope, spacing_scale: float = 1.0):
+    """The rays that go on after the hits ``poly`` (k,) at ``dist`` (k,): each hit's specular
+    reflection, and its branches (:func:`neighbour_branches`) to the faces beside it.
+
+    The rays' spacing at a hit is ``(spacing_base + spacing_slope * (travelled + dist)) /
+    spacing_scale`` (``spacing_base``, ``spacing_slope``: scalars or (k,) arrays). Returns ``(rows, mirror, origin, direction, travelled)``: for
+    each new ray the row of the ray it continues, the face it reflects on, its start and
+    unit direction, and the unfolded distance from the source to its start [m].
+    """
+    hr = np.nonzero(poly >= 0)[0]
+    x = origin[hr] + dist[hr, None] * u[hr]
+    at = travelled[hr] + dist[hr]
+    spacing = (np.broadcast_to(spacing_base, poly.shape)[hr]
+               + np.broadcast_to(spacing_slope, poly.shape)[hr] * at) / spacing_scale
+    br, bq, bstep = neighbour_branches(scene, poly[hr], x, u[hr], spacing, origin[hr])
+    rows = np.concatenate([hr, hr[br]])
+    mirror = np.concatenate([poly[hr], bq])
+    start = np.concatenate([x, x[br] + bstep[:, None] * u[hr[br]]])
+    at = np.concatenate([at, np.maximum(at[br] + bstep, 0.0)])
+    n = scene.polygon_normal[mirror]
+    v = u[rows]
+    return rows, mirror, start, v - 2.0 * np.einsum("ij,ij->i", v, n)[:, None] * n, at
