@@ -256,3 +256,78 @@ def test_compiled_branches_equal_the_numpy_ones(canyon, rng):
     ref = _neighbour_branches(scene, poly, x, u, radius, origin, compiled=False)
     key = lambda r: sorted(zip(r[0].tolist(), r[1].tolist(), np.round(r[2], 9).tolist()))
     assert key(got) == key(ref) and len(ref[0]) > 50
+
+
+@pytest.mark.skipif(not kernels.available(), reason="numba not installed (the `fast` extra)")
+def test_elliptic_tubes_compiled_equal_numpy_and_have_their_semi_axes(monkeypatch, rng):
+    """Tubes with an elliptic cross-section (semi-axis r along ``across``, s along the other
+    normal, a cap of length r past a clamped end), in float64 and float32: the compiled walk
+    and the numpy reference give the same pairs; a point 1 mm inside a semi-axis (across, the
+    other normal, past the end) is in, 1 mm outside is out."""
+    S = rng.normal(size=(300, 3)) * 10
+    E = S + rng.normal(size=(300, 3)) * 5
+    d = (E - S) / np.linalg.norm(E - S, axis=1)[:, None]
+    a = np.cross(d, rng.normal(size=(300, 3)))
+    a /= np.linalg.norm(a, axis=1)[:, None]
+    r0, r1 = rng.uniform(0.5, 2, 300), rng.uniform(2, 6, 300)
+    s0, s1 = 0.2 * r0, 0.3 * r1
+    pts = rng.normal(size=(400, 3)) * 10
+    for dt in (np.float64, np.float32):
+        args = [x.astype(dt) for x in (S, E, r0, r1)]
+        kw = {"s0": s0.astype(dt), "s1": s1.astype(dt), "across": a.astype(dt)}
+        got = set(zip(*(x.tolist() for x in _deposit(*args, pts, **kw))))
+        monkeypatch.setattr(kernels, "available", lambda: False)
+        ref = set(zip(*(x.tolist() for x in _deposit(*args, pts, **kw))))
+        monkeypatch.undo()
+        assert got == ref and len(ref) > 50
+        round_ = set(zip(*(x.tolist() for x in _deposit(*args, pts))))
+        assert ref < round_  # thinner than the round tube of radius r
+    b = np.cross(d, a)
+    mid, r, s = 0.5 * (S + E), 0.5 * (r0 + r1), 0.5 * (s0 + s1)
+    for delta, expect in ((-1e-3, True), (1e-3, False)):
+        for k in range(0, 300, 29):
+            one = dict(s0=s0[k:k + 1], s1=s1[k:k + 1], across=a[k:k + 1])
+            for p in (mid[k] + (r[k] + delta) * a[k], mid[k] + (s[k] + delta) * b[k], E[k] + (r1[k] + delta) * d[k]):
+                seg, _ = _deposit(S[k:k + 1], E[k:k + 1], r0[k:k + 1], r1[k:k + 1], p[None], **one)
+                assert (len(seg) == 1) == expect
+
+
+def test_a_tube_the_box_test_drops_reaches_no_point_of_the_box(rng):
+    """``_reaches_box`` is conservative: of random segments with growing radii, those it
+    drops have no point of a dense cloud in the box within their tube, and it drops most
+    segments that rise away from a flat box."""
+    from wavepaths.search.launch import _reaches_box
+
+    lo, hi = np.array([-20.0, -10.0, 1.0]), np.array([20.0, 10.0, 2.0])
+    S = rng.uniform(-40, 40, (3000, 3))
+    S[:, 2] = rng.uniform(0, 20, 3000)
+    E = S + rng.normal(size=(3000, 3)) * 30
+    r0 = rng.uniform(0, 1, 3000)
+    r1 = r0 + rng.uniform(0, 8, 3000)
+    keep = _reaches_box(S, E, r0, r1, lo, hi)
+    assert 0.1 < keep.mean() < 0.9
+    cloud = rng.uniform(lo, hi, (20000, 3))
+    seg, _ = _deposit(S[~keep], E[~keep], r0[~keep], r1[~keep], cloud)
+    assert len(seg) == 0
+    seg, _ = _deposit(S[keep], E[keep], r0[keep], r1[keep], cloud)
+    assert len(np.unique(seg)) > 0.3 * keep.sum()
+    up = np.column_stack([np.zeros(100), np.zeros(100), np.full(100, 10.0)])
+    assert not _reaches_box(up, up + [0, 0, 500], np.full(100, 0.5), np.full(100, 25.0), lo, hi).any()
+
+
+def test_fans_traced_once_for_a_box_give_each_subset_its_own_candidates(canyon):
+    """The Keller fans traced once for the box of all receivers (:func:`fan_segments`, what
+    a coverage map does) give any subset of them the candidates its own fans give; a point
+    outside the box is refused."""
+    from wavepaths.search.launch import fan_segments
+
+    scene, ctx, pts, _ = canyon
+    samples = edge_samples(scene, ctx)
+    segs = fan_segments(scene, ctx, pts.min(axis=0), pts.max(axis=0), LaunchOptions(), samples)
+    assert segs.start.dtype == np.float32 and len(segs) > 1000
+    sub = pts[::3]
+    own = candidate_sequences(scene, ctx, sub, LaunchOptions(), samples)
+    cached = candidate_sequences(scene, ctx, sub, LaunchOptions(), samples, segs)
+    assert own.keys() == cached.keys() and len(own) > 100
+    with pytest.raises(WavepathsError, match="box"):
+        candidate_sequences(scene, ctx, pts.max(axis=0)[None] + 1.0, LaunchOptions(), samples, segs)

@@ -39,6 +39,7 @@ from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble
 from ..search.diffraction import finish_diffraction
+from ..search.launched import prepare_launched
 from ..search.tile import trace_tile
 from ..search.trace import check_positions
 from .grid import Grid, MeshGrid, PlanarGrid
@@ -99,6 +100,43 @@ LAUNCHED_TILE_MAX = 2048
 """Cells per tile at most with launched candidates: munich at R2+D2 carries about 3,000
 candidate sequences per cell (80 bytes each), and a 2,048-cell tile peaked at 3.8 GB with
 the context (docs/benchmarks.md, sixteenth session)."""
+
+
+def block_tiles(shape: tuple[int, ...], active: np.ndarray, size: int) -> list[np.ndarray]:
+    """Tiles of at most ``size`` cells that are compact blocks of a 2-D grid.
+
+    The grid ``shape`` (ny, nx) is cut into squares of ``floor(sqrt(size))`` cells a side;
+    each square's active cells (``active``: flat indices, row-major) go to one tile, and
+    consecutive squares of a row of squares share a tile while they fit in ``size``. With
+    launched candidates a tile's work grows with the rays that cross it, so a square
+    meets fewer rays than a strip of whole rows of the same area. A grid that is not 2-D
+    is cut into runs of consecutive cells.
+    """
+    active = np.asarray(active, dtype=np.int64)
+    if len(shape) != 2 or len(active) == 0:
+        return [active[s : s + size] for s in range(0, len(active), size)]
+    ny, nx = shape
+    side = max(1, int(np.sqrt(size)))
+    row, col = np.divmod(active, nx)
+    block = (row // side) * (-(-nx // side)) + col // side
+    order = np.argsort(block, kind="stable")
+    block, cells = block[order], active[order]
+    bounds = np.flatnonzero(np.diff(block)) + 1
+    groups = np.split(cells, bounds)
+    tiles: list[np.ndarray] = []
+    run: list[np.ndarray] = []
+    count = 0
+    row_of = [int(g[0] // nx) // side for g in groups]
+    for g, r in zip(groups, row_of):
+        if run and (count + len(g) > size or r != run_row):
+            tiles.append(np.concatenate(run))
+            run, count = [], 0
+        run.append(g)
+        run_row = r
+        count += len(g)
+    if run:
+        tiles.append(np.concatenate(run))
+    return tiles
 
 
 def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> int:
@@ -355,6 +393,12 @@ def coverage(
     t = time.perf_counter()
     ctx = build_tx_context(scene, tx, opts)
     timings["context_s"] = time.perf_counter() - t
+    launched = opts.diffraction_candidates == "launched" or opts.reflection_candidates == "launched"
+    if launched:
+        # the Keller fans traced once here for every cell, then shipped with the context
+        t = time.perf_counter()
+        prepare_launched(scene, ctx, flat[active])
+        timings["launch_s"] = time.perf_counter() - t
 
     a_total = np.full((m, n), np.nan + 0j)
     a_sum = np.full((3, m, n), np.nan + 0j)
@@ -363,7 +407,10 @@ def coverage(
     stats: Counter = Counter(ctx.stats)
     size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers)
     timings["tile_size"] = size
-    tiles = [active[s : s + size] for s in range(0, len(active), size)]
+    if launched and isinstance(grid, PlanarGrid):
+        tiles = block_tiles(grid.shape, active, size)
+    else:
+        tiles = [active[s : s + size] for s in range(0, len(active), size)]
     bar, report = _progress(progress, len(active))
 
     def on_done(i: int, sums: TileSums) -> None:
@@ -471,4 +518,4 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
-__all__ = ["CoverageOptions", "TileSums", "auto_tile_size", "coverage", "path_mechanism", "solve_tile", "MECHANISMS"]
+__all__ = ["CoverageOptions", "TileSums", "auto_tile_size", "block_tiles", "coverage", "path_mechanism", "solve_tile", "MECHANISMS"]

@@ -6,39 +6,26 @@ import numba as nb
 import numpy as np
 
 
-@nb.njit(parallel=True, cache=True)
-def tube_contains(start, end, r0, r1, points, out):  # pragma: no cover - compiled
-    """out[k, p]: point p lies within segment k's tube (radius r0 at ``start`` to r1 at
-    ``end``, linear in the parameter of the point's closest point on the segment)."""
-    for k in nb.prange(start.shape[0]):
-        dx = end[k, 0] - start[k, 0]
-        dy = end[k, 1] - start[k, 1]
-        dz = end[k, 2] - start[k, 2]
-        L2 = dx * dx + dy * dy + dz * dz
-        for p in range(points.shape[0]):
-            px = points[p, 0] - start[k, 0]
-            py = points[p, 1] - start[k, 1]
-            pz = points[p, 2] - start[k, 2]
-            u = (px * dx + py * dy + pz * dz) / L2 if L2 > 0.0 else 0.0
-            u = min(max(u, 0.0), 1.0)
-            qx = px - u * dx
-            qy = py - u * dy
-            qz = pz - u * dz
-            r = r0[k] + u * (r1[k] - r0[k])
-            out[k, p] = qx * qx + qy * qy + qz * qz <= r * r
-
-
 @nb.njit(cache=True)
-def _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, out_pt, write):  # pragma: no cover
+def _segment_points(k, start, end, r0, r1, s0, s1, across, points, lo, h, dims, bstart, order, out_pt,
+                    write):  # pragma: no cover
     """Points of segment k's tube, each once: the segment is cut into slices of length ``h``;
     a slice owns the points whose closest parameter falls in it and finds them among the
     grid buckets within its largest radius plus ``h`` of its middle. Writes them to
-    ``out_pt`` when ``write`` (from index 0); returns how many."""
+    ``out_pt`` when ``write`` (from index 0); returns how many.
+
+    The tube's cross-section is an ellipse: semi-axis ``r`` (r0 to r1) along the unit
+    vector ``across[k]`` and ``s`` (s0 to s1) along the other direction normal to the
+    segment; ``across[k] = 0`` and ``s = r`` give a round tube. A point at offset ``q``
+    from its closest point is in when ``|q| <= max(r, s)`` and
+    ``c / r^2 + (|q|^2 - c) / s^2 <= 1`` with ``c = (q . a)^2 + (q . d)^2`` (``d`` the
+    segment's unit direction: past a clamped end, the cap is as long as ``r``)."""
     sx, sy, sz = start[k, 0], start[k, 1], start[k, 2]
     dx, dy, dz = end[k, 0] - sx, end[k, 1] - sy, end[k, 2] - sz
     L2 = dx * dx + dy * dy + dz * dz
     L = np.sqrt(L2)
-    rmax = max(r0[k], r1[k])
+    ax_, ay_, az_ = across[k, 0], across[k, 1], across[k, 2]
+    rmax = max(max(r0[k], r1[k]), max(s0[k], s1[k]))
     # clip [0, 1] to the points' box grown by rmax (slabs)
     u0, u1 = 0.0, 1.0
     hi0 = lo[0] + dims[0] * h
@@ -71,7 +58,8 @@ def _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, o
         ub = u0 + (j + 1) * du
         um = 0.5 * (ua + ub)
         mx, my, mz = sx + um * dx, sy + um * dy, sz + um * dz
-        reach = max(r0[k] + ua * (r1[k] - r0[k]), r0[k] + ub * (r1[k] - r0[k])) + 0.5 * du * L + 1e-9
+        reach = max(max(r0[k] + ua * (r1[k] - r0[k]), r0[k] + ub * (r1[k] - r0[k])),
+                    max(s0[k] + ua * (s1[k] - s0[k]), s0[k] + ub * (s1[k] - s0[k]))) + 0.5 * du * L + 1e-9
         i0 = max(0, int(np.floor((mx - reach - lo[0]) / h)))
         i1 = min(dims[0] - 1, int(np.floor((mx + reach - lo[0]) / h)))
         j0 = max(0, int(np.floor((my - reach - lo[1]) / h)))
@@ -100,7 +88,17 @@ def _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, o
                         qy = py - u * dy
                         qz = pz - u * dz
                         r = r0[k] + u * (r1[k] - r0[k])
-                        if qx * qx + qy * qy + qz * qz <= r * r:
+                        sr = s0[k] + u * (s1[k] - s0[k])
+                        qq = qx * qx + qy * qy + qz * qz
+                        rm = max(r, sr)
+                        if qq > rm * rm:
+                            continue
+                        c = qx * ax_ + qy * ay_ + qz * az_
+                        # past a clamped end, q runs along the segment too: that part counts
+                        # against r (a cap as wide as the fan's spacing, not the samples')
+                        e = (qx * dx + qy * dy + qz * dz) / L if L > 0.0 else 0.0
+                        c = c * c + e * e
+                        if c * sr * sr + (qq - c) * r * r <= r * r * sr * sr:
                             if write:
                                 out_pt[n] = p
                             n += 1
@@ -108,18 +106,22 @@ def _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, o
 
 
 @nb.njit(parallel=True, cache=True)
-def tube_counts(start, end, r0, r1, points, lo, h, dims, bstart, order, counts):  # pragma: no cover - compiled
+def tube_counts(start, end, r0, r1, s0, s1, across, points, lo, h, dims, bstart, order,
+                counts):  # pragma: no cover - compiled
     """counts[k]: the points in segment k's tube (:func:`_segment_points`)."""
     dummy = np.empty(0, np.int64)
     for k in nb.prange(start.shape[0]):
-        counts[k] = _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, dummy, False)
+        counts[k] = _segment_points(k, start, end, r0, r1, s0, s1, across, points, lo, h, dims, bstart, order, dummy,
+                                    False)
 
 
 @nb.njit(parallel=True, cache=True)
-def tube_fill(start, end, r0, r1, points, lo, h, dims, bstart, order, ptr, out_pt):  # pragma: no cover - compiled
+def tube_fill(start, end, r0, r1, s0, s1, across, points, lo, h, dims, bstart, order, ptr,
+              out_pt):  # pragma: no cover - compiled
     """The points of :func:`tube_counts`, segment k's at ``out_pt[ptr[k]:ptr[k + 1]]``."""
     for k in nb.prange(start.shape[0]):
-        _segment_points(k, start, end, r0, r1, points, lo, h, dims, bstart, order, out_pt[ptr[k]:ptr[k + 1]], True)
+        _segment_points(k, start, end, r0, r1, s0, s1, across, points, lo, h, dims, bstart, order,
+                        out_pt[ptr[k]:ptr[k + 1]], True)
 
 
 @nb.njit(cache=True)

@@ -242,10 +242,6 @@ def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.nd
             spacing[row[k]] / np.maximum(length, 1e-9))
 
 
-def __missing__(self, key):
-        return 0
-
-
 def keller_fan(scene: "Scene", dihedron: np.ndarray, t: np.ndarray, incident: np.ndarray, fan: int
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Directions on the Keller cone of each sample, in its wedge's exterior.
@@ -290,10 +286,109 @@ def _fan_chunks(samples: EdgeSamples, fan: int, fan_rays: int) -> Iterator[np.nd
         yield np.arange(s0, min(len(samples), s0 + step))
 
 
-def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
-                        options: LaunchOptions = LaunchOptions(),
-                        samples: EdgeSamples | None = None) -> CandidateSequences:
-    """The diffracted sequences whose Keller fans pass near each of ``points`` (step 2).
+@dataclass(frozen=True)
+class FanSegments:
+    """The segments of the Keller fans' rays whose tubes reach a box of query points, struct
+    of arrays over ``n`` segments and ``m`` distinct sequences.
+
+    Traced once (:func:`fan_segments`) and queried by any set of points in the box
+    (:func:`candidate_sequences`): a coverage map traces its fans once for all its tiles.
+    The coordinates are float32 offsets from ``centre`` (recentred, so that float32 keeps
+    about 0.1 mm within a few kilometres of it; the tubes are at least ``2 x spacing`` wide).
+
+    Attributes
+    ----------
+    centre : (3,) float64
+        Origin of the float32 coordinates [m].
+    lo, hi : (3,) float64
+        The box the segments were kept for [m].
+    start, end : (n, 3) float32
+        Ends of each segment [m from ``centre``].
+    r0, r1 : (n,) float32
+        Semi-axis of the tube across the Keller cone (the fan's spacing) at each end [m].
+    s0, s1 : (n,) float32
+        Semi-axis along the cone's other normal direction (the samples' spacing) [m].
+    across : (n, 3) float32
+        Unit vector normal to the segment across the cone (mirrored with the ray).
+    sequence : (n,) int32
+        Row of the segment's sequence in the tables below.
+    order : (m,) int64
+        Reflections before the edge (``a``).
+    source : (m,) int64
+        Row in ``ctx.diffraction_sources[order]``.
+    before : (m, D) int64
+        Mirrors before the edge in path order, ``-1`` padded.
+    dihedron : (m,) int64
+    after : (m, D) int64
+        Mirrors after the edge in path order, ``-1`` padded.
+    """
+
+    centre: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    r0: np.ndarray
+    r1: np.ndarray
+    s0: np.ndarray
+    s1: np.ndarray
+    across: np.ndarray
+    sequence: np.ndarray
+    order: np.ndarray
+    source: np.ndarray
+    before: np.ndarray
+    dihedron: np.ndarray
+    after: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.sequence)
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(getattr(self, f).nbytes for f in self.__dataclass_fields__))
+
+    def covers(self, points: np.ndarray) -> bool:
+        """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
+        return bool(len(points) == 0 or (np.all(points.min(axis=0) >= self.lo) and np.all(points.max(axis=0) <= self.hi)))
+
+
+def _reaches_box(origin: np.ndarray, end: np.ndarray, r0: np.ndarray, r1: np.ndarray, lo: np.ndarray,
+                 hi: np.ndarray) -> np.ndarray:
+    """(k,) bool: the tube of segment ``origin -> end``, radius ``r0`` to ``r1`` (linear in the
+    segment's parameter ``u``), may reach the box ``[lo, hi]``: some ``u`` in [0, 1] has every
+    coordinate within the radius of the box, ``lo - r(u) <= x(u) <= hi + r(u)`` (conservative:
+    the box grown by a cube of the radius, not a sphere). Each of the six conditions is linear
+    in ``u``, so the ``u`` that pass form one interval (a ray rising from a roof, whose tube
+    widens slower than it climbs, never comes down to the receivers)."""
+    d = end - origin
+    dr = r1 - r0
+    u0 = np.zeros(len(origin))
+    u1 = np.ones(len(origin))
+    for ax in range(3):
+        # x + r >= lo  and  x - r <= hi, i.e. a u <= b for (a, b) below
+        for a, b in ((-(d[:, ax] + dr), origin[:, ax] + r0 - lo[ax]), (d[:, ax] - dr, hi[ax] + r0 - origin[:, ax])):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                bound = b / a
+            u1 = np.where(a > 0, np.minimum(u1, bound), u1)
+            u0 = np.where(a < 0, np.maximum(u0, bound), u0)
+            u1 = np.where((a == 0) & (b < 0), -1.0, u1)
+    return u0 <= u1
+
+
+def fan_segments(scene: "Scene", ctx: "TxContext", lo: np.ndarray, hi: np.ndarray,
+                 options: LaunchOptions = LaunchOptions(), samples: EdgeSamples | None = None) -> FanSegments:
+    """Trace the Keller fans of every sample (step 2 of the module) and keep the segments
+    whose tubes reach the box ``[lo, hi]`` of the query points.
+
+    From each sample, ``options.fan`` directions per turn on its Keller cone, in the wedge's
+    exterior (:func:`keller_fan`), go through up to ``D - a`` specular reflections (first hits
+    from the ray caster, passing through the faces the ray leaves; reflected in float64, with
+    the branches of :func:`~wavepaths.search.rays.reflect_and_branch`). A segment's tube is
+    an ellipse: across the cone, ``radius_factor x (spacing + sin(beta) x dphi x t)``; along
+    it, ``radius_factor x (spacing + angular x t)``, with ``t`` the unfolded distance from
+    the edge, ``dphi = 2 pi / fan`` and the sample's ``spacing`` and ``angular`` spacing
+    (neighbouring samples' rays are displaced along the edge, which projects on the second
+    axis only; neighbouring directions of one fan, on the first).
 
     Parameters
     ----------
@@ -301,40 +396,42 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
     ctx : TxContext
         Built with diffraction for one transmitter; ``ctx.options.diffraction_reflections``
         (``D``) bounds the reflections before plus after the edge.
-    points : (p, 3) float64
-        Query points (receivers) [m].
+    lo, hi : (3,) float64
+        The box of the query points [m].
     options : LaunchOptions
     samples : EdgeSamples, optional
         From :func:`edge_samples` (computed when not given).
 
     Returns
     -------
-    CandidateSequences
-        Distinct rows (point, before, dihedron, after).
+    FanSegments
     """
-    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    lo = np.asarray(lo, dtype=np.float64).reshape(3)
+    hi = np.asarray(hi, dtype=np.float64).reshape(3)
+    centre = 0.5 * (lo + hi)
     if samples is None:
         samples = edge_samples(scene, ctx, options)
     Dmax = ctx.options.diffraction_reflections
     far = 2.0 * scene.diagonal
     eps = 1e-6 * scene.diagonal  # rays leave an edge or a mirror: skip the float32 re-hit of their own face
     dphi = 2 * np.pi / options.fan
-    width = 4 + 2 * Dmax  # point, order, source, before (D), dihedron, after (D)
-    from . import kernels
-
-    grid = PointGrid(points) if kernels.available() else None
-    found = []
+    D_ = scene.dihedra
+    parts: list[tuple] = []
     for rows in _fan_chunks(samples, options.fan, options.fan_rays):
         P, V, ext, sb = keller_fan(scene, samples.dihedron[rows], samples.t[rows], samples.incident[rows], options.fan)
         si, fi = np.nonzero(ext)
         origin, u = P[si], V[si, fi]
         sample = rows[si]
-        # tube radius: the sample spacing, plus the fan's and the samples' angular spacing times the distance
-        r_edge = options.radius_factor * samples.spacing[sample]
-        grow = options.radius_factor * (sb[si] * dphi + samples.angular[sample])
+        # the fan's direction of increasing angle, normal to the ray: -sin(phi) f0 + cos(phi) w x f0
+        w = D_.direction[samples.dihedron[sample]]
+        f0 = D_.face_direction[D_.face_ptr[samples.dihedron[sample]]]
+        phi = (fi + 0.5) * dphi
+        across = -np.sin(phi)[:, None] * f0 + np.cos(phi)[:, None] * np.cross(w, f0)
+        base = options.radius_factor * samples.spacing[sample]
+        grow_r = options.radius_factor * sb[si] * dphi
+        grow_s = options.radius_factor * samples.angular[sample]
         travelled = np.zeros(len(si))
         after = np.full((len(si), Dmax), -1, np.int64)
-        D_ = scene.dihedra
         fp = D_.face_ptr[samples.dihedron[sample]]
         nf = D_.face_ptr[samples.dihedron[sample] + 1] - fp
         skip = np.stack([D_.face_polygon[fp], np.where(nf > 1, D_.face_polygon[np.minimum(fp + 1, len(D_.face_polygon) - 1)],
@@ -342,36 +439,103 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
         for b in range(Dmax + 1):
             live = samples.order[sample] + b <= Dmax
             if not live.all():
-                origin, u, sample, r_edge, grow, travelled, after, skip = (
-                    x[live] for x in (origin, u, sample, r_edge, grow, travelled, after, skip))
+                origin, u, sample, base, grow_r, grow_s, travelled, after, skip, across = (
+                    x[live] for x in (origin, u, sample, base, grow_r, grow_s, travelled, after, skip, across))
             if len(origin) == 0:
                 break
             poly, dist = first_hits_past(scene, origin, u, far, eps, skip)
             end = origin + dist[:, None] * u
-            seg, pt = tube_pairs(origin, end, r_edge + grow * travelled, r_edge + grow * (travelled + dist), points, grid)
-            if len(seg):
-                s = sample[seg]
-                row = np.empty((len(seg), width), np.int64)
-                row[:, 0] = pt
-                row[:, 1] = samples.order[s]
-                row[:, 2] = samples.source[s]
-                row[:, 3:3 + Dmax] = samples.chain[s][:, :Dmax] if samples.chain.shape[1] >= Dmax else np.pad(
-                    samples.chain[s], ((0, 0), (0, Dmax - samples.chain.shape[1])), constant_values=-1)
-                row[:, 3 + Dmax] = samples.dihedron[s]
-                row[:, 4 + Dmax:] = after[seg]
-                found.append(unique_rows(row))
+            t1 = travelled + dist
+            r0, r1 = base + grow_r * travelled, base + grow_r * t1
+            s0, s1 = base + grow_s * travelled, base + grow_s * t1
+            keep = np.nonzero(_reaches_box(origin, end, np.maximum(r0, s0), np.maximum(r1, s1), lo, hi))[0]
+            if len(keep):
+                parts.append((origin[keep] - centre, end[keep] - centre, r0[keep], r1[keep], s0[keep], s1[keep],
+                               across[keep], sample[keep], after[keep]))
             hit = poly >= 0
             if b == Dmax or not hit.any():
                 break
-            sel, mirror, origin, u, travelled = reflect_and_branch(scene, origin, u, poly, dist, travelled,
-                                                                   r_edge, grow, options.radius_factor)
-            sample, r_edge, grow = sample[sel], r_edge[sel], grow[sel]
-            after = after[sel]
+            sel, mirror, origin, u, travelled = reflect_and_branch(
+                scene, origin, u, poly, dist, travelled, base, grow_r + grow_s, options.radius_factor)
+            sample, base, grow_r, grow_s, after = sample[sel], base[sel], grow_r[sel], grow_s[sel], after[sel]
+            n = scene.polygon_normal[mirror]
+            across = across[sel]
+            across = across - 2.0 * np.einsum("ij,ij->i", across, n)[:, None] * n
             after[:, b] = mirror
             skip = np.stack([mirror, np.full(len(mirror), -1)], axis=1)  # the mirror just left
-    rows = unique_rows(np.concatenate(found)) if found else np.zeros((0, width), np.int64)
-    return CandidateSequences(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3:3 + Dmax], rows[:, 3 + Dmax],
-                              rows[:, 4 + Dmax:])
+    A = samples.chain.shape[1]
+    if parts:
+        cols = [np.concatenate(c) for c in zip(*parts)]
+    else:
+        cols = [np.zeros((0, 3)), np.zeros((0, 3)), *(np.zeros(0),) * 4, np.zeros((0, 3)), np.zeros(0, np.int64),
+                np.zeros((0, Dmax), np.int64)]
+    start, end, r0, r1, s0, s1, across, sample, after = cols
+    # the distinct sequences: (order, source, after) names the mirrors before and the dihedron too
+    key = np.column_stack([samples.order[sample], samples.source[sample], after]).astype(np.int64)
+    table, inverse = unique_rows(key, return_inverse=True)
+    first = np.zeros(len(table), np.int64)
+    first[inverse] = np.arange(len(key))
+    rep = sample[first]
+    before = np.full((len(table), Dmax), -1, np.int64)
+    before[:, :min(A, Dmax)] = samples.chain[rep][:, :min(A, Dmax)]
+    f32 = np.float32
+    return FanSegments(centre, lo, hi, start.astype(f32), end.astype(f32), r0.astype(f32), r1.astype(f32),
+                       s0.astype(f32), s1.astype(f32), across.astype(f32), inverse.astype(np.int32),
+                       table[:, 0].copy(), table[:, 1].copy(), before, samples.dihedron[rep], table[:, 2:].copy())
+
+
+SEGMENT_CHUNK = 1 << 21
+"""Cached segments queried at once (bounds the (segment, point) pairs held before their keys are made distinct)."""
+
+
+def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
+                        options: LaunchOptions = LaunchOptions(),
+                        samples: EdgeSamples | None = None,
+                        segments: FanSegments | None = None) -> CandidateSequences:
+    """The diffracted sequences whose Keller fans pass near each of ``points`` (step 2).
+
+    Parameters
+    ----------
+    scene : Scene
+    ctx : TxContext
+        Built with diffraction for one transmitter.
+    points : (p, 3) float64
+        Query points (receivers) [m].
+    options : LaunchOptions
+    samples : EdgeSamples, optional
+        From :func:`edge_samples` (computed when not given).
+    segments : FanSegments, optional
+        From :func:`fan_segments`, kept for a box that holds ``points`` (traced for the
+        points' own box when not given).
+
+    Returns
+    -------
+    CandidateSequences
+        Distinct rows (point, before, dihedron, after).
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    Dmax = ctx.options.diffraction_reflections
+    if segments is None:
+        lo, hi = (points.min(axis=0), points.max(axis=0)) if len(points) else (np.zeros(3), np.zeros(3))
+        segments = fan_segments(scene, ctx, lo, hi, options, samples)
+    elif not segments.covers(points):
+        raise WavepathsError("the fan segments were kept for a box that does not hold every query point")
+    from . import kernels
+
+    local = points - segments.centre
+    grid = PointGrid(local) if kernels.available() and len(points) else None
+    m = max(len(segments.order), 1)
+    keys = []
+    for c0 in range(0, len(segments), SEGMENT_CHUNK):
+        c = slice(c0, c0 + SEGMENT_CHUNK)
+        seg, pt = tube_pairs(segments.start[c], segments.end[c], segments.r0[c], segments.r1[c], local, grid,
+                             s0=segments.s0[c], s1=segments.s1[c], across=segments.across[c])
+        if len(seg):
+            keys.append(np.unique(pt * m + segments.sequence[c][seg]))
+    k = np.unique(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
+    q = k % m
+    return CandidateSequences(k // m, segments.order[q], segments.source[q], segments.before[q],
+                              segments.dihedron[q], segments.after[q])
 
 
 def chain_rows(polygons: np.ndarray, query: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ from .diffraction import _diffraction_candidates, _diffraction_prefilter
 from .end_sides import _EndSide, _edge_frame, _sector_in_table, _transmitter_side
 from .geometry import mirror_points
 from .images import ImageLevel
-from .launch import EdgeSamples, LaunchOptions, candidate_sequences, edge_samples
+from .launch import EdgeSamples, FanSegments, LaunchOptions, candidate_sequences, edge_samples, fan_segments
 from .paths import PathBatch
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -56,6 +56,28 @@ def context_samples(scene: "Scene", ctx: "TxContext") -> EdgeSamples:
             if got is None:
                 got = edge_samples(scene, ctx, launch_options(ctx))
                 ctx.derived[key] = got
+    return got
+
+
+def prepare_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray) -> FanSegments | None:
+    """Trace the context's Keller fans once for every query point to come (a coverage map's
+    cells, a path query's receivers) and keep them in ``ctx.derived``, so that the tiles of
+    ``points`` query them instead of tracing the fans again (:func:`launched_diffraction`).
+
+    Does nothing (returns ``None``) unless ``ctx.options.diffraction_candidates ==
+    "launched"``. The segments are those whose tubes reach the box of ``points``
+    (:func:`~wavepaths.search.launch.fan_segments`); a tile outside that box traces its own.
+    """
+    if not (ctx.options.diffraction and ctx.options.diffraction_candidates == "launched") or len(points) == 0:
+        return None
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    key = ("launch_fans", ctx.options.launch_fan)
+    got = ctx.derived.get(key)
+    if got is not None and got.covers(points):
+        return got
+    got = fan_segments(scene, ctx, points.min(axis=0), points.max(axis=0), launch_options(ctx),
+                       context_samples(scene, ctx))
+    ctx.derived[key] = got
     return got
 
 
@@ -97,7 +119,10 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
     """
     opts = ctx.options
     samples = context_samples(scene, ctx)
-    seq = candidate_sequences(scene, ctx, rx, launch_options(ctx), samples)
+    segments = ctx.derived.get(("launch_fans", opts.launch_fan))
+    if segments is not None and not segments.covers(rx):
+        segments = None  # traced for other points: this tile's own box instead
+    seq = candidate_sequences(scene, ctx, rx, launch_options(ctx), samples, segments)
     stats["launched_candidates"] += len(seq)
     out: list[PathBatch] = []
     Dmax = opts.diffraction_reflections

@@ -28,6 +28,7 @@ from ..errors import WavepathsError
 from ..scene.model import Scene
 from . import kernels
 from .context import TxContext, build_tx_context
+from .launched import prepare_launched
 from .options import TraceOptions
 from .paths import Paths, assemble
 from .tile import trace_tile
@@ -208,6 +209,7 @@ def trace(
     _warn_inside(scene, tx, rx)
     _warn_on_faces(scene, tx, rx)
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
+    prepare_launched(scene, ctx, rx)  # launched candidates: the fans traced once for every tile
     stats: Counter = Counter(ctx.stats)
     batches = []
     if threads is not None and int(threads) < 1:

@@ -44,23 +44,39 @@ class PointGrid:
         return i[:, 0] + self.dims[0] * (i[:, 1] + self.dims[1] * i[:, 2])
 
 
-def tube_pairs(start, end, r0, r1, points, grid: PointGrid | None = None,
-             budget: int = 1 << 26) -> tuple[np.ndarray, np.ndarray]:
-    """(segment, point) pairs with the point within the segment's tube (radius from r0 at
-    ``start`` to r1 at ``end``, linear in the closest point's parameter), each pair once.
+def _floats(x) -> np.ndarray:
+    """``x`` as a C-contiguous float array: float32 kept (the cached fan segments), else float64."""
+    x = np.asarray(x)
+    return np.ascontiguousarray(x, dtype=np.float32 if x.dtype == np.float32 else np.float64)
+
+
+def tube_pairs(start, end, r0, r1, points, grid: PointGrid | None = None, budget: int = 1 << 26,
+               s0=None, s1=None, across=None) -> tuple[np.ndarray, np.ndarray]:
+    """(segment, point) pairs with the point within the segment's tube, each pair once.
+
+    The tube's radius goes from ``r0`` at ``start`` to ``r1`` at ``end``, linear in the
+    parameter of the point's closest point on the segment. With ``across`` (k, 3), unit
+    vectors normal to the segments, the cross-section is an ellipse instead: semi-axis ``r``
+    along ``across`` and ``s`` (``s0`` to ``s1``) along the other normal direction (a Keller
+    fan's rays are spaced by the fan's angle across the cone and by the samples along it;
+    past a segment's end, where the ray stopped on a face, the cap is as long as ``r``: the
+    neighbouring rays across the cone may go on beside the face).
 
     Compiled: a walk along each segment over the buckets of ``grid`` (a :class:`PointGrid`
     of ``points``, built when not given). numpy: every (segment, point) pair, in chunks
-    (the reference)."""
+    (the reference). ``start``, ``end``, the radii and ``across`` may be float32 (the
+    segments cached per context), in the frame of ``points``."""
     from . import kernels
 
-    start, end = np.ascontiguousarray(start, dtype=np.float64), np.ascontiguousarray(end, dtype=np.float64)
-    r0, r1 = np.ascontiguousarray(r0, dtype=np.float64), np.ascontiguousarray(r1, dtype=np.float64)
+    start, end, r0, r1 = _floats(start), _floats(end), _floats(r0), _floats(r1)
+    if across is None:
+        s0, s1, across = r0, r1, np.zeros((len(start), 3), r0.dtype)
+    s0, s1, across = _floats(s0), _floats(s1), _floats(across)
     if kernels.available():
         from . import _numba_launch
 
         g = grid if grid is not None else PointGrid(points)
-        args = (start, end, r0, r1, g.points, g.lo, g.h, g.dims, g.start, g.order)
+        args = (start, end, r0, r1, s0, s1, across, g.points, g.lo, g.h, g.dims, g.start, g.order)
         counts = np.empty(len(start), np.int64)
         _numba_launch.tube_counts(*args, counts)
         ptr = np.zeros(len(start) + 1, np.int64)
@@ -70,25 +86,35 @@ def tube_pairs(start, end, r0, r1, points, grid: PointGrid | None = None,
         return np.repeat(np.arange(len(start)), counts), pt
     seg, pt = [], []
     step = max(1, budget // max(len(points), 1) // 8)
-    for s0 in range(0, len(start), step):
-        S, E = start[s0:s0 + step], end[s0:s0 + step]
+    for c0 in range(0, len(start), step):
+        S, E = start[c0:c0 + step].astype(np.float64), end[c0:c0 + step].astype(np.float64)
         d = E - S
         L2 = np.einsum("ij,ij->i", d, d)
         p = points[None, :, :] - S[:, None, :]
         u = np.clip(np.einsum("kpj,kj->kp", p, d) / np.where(L2 > 0, L2, 1.0)[:, None], 0.0, 1.0)
         q = p - u[..., None] * d[:, None, :]
-        r = r0[s0:s0 + step, None] + u * (r1 - r0)[s0:s0 + step, None]
-        i, j = np.nonzero(np.einsum("kpj,kpj->kp", q, q) <= r * r)
-        seg.append(i + s0)
+        r = r0[c0:c0 + step, None] + u * (r1 - r0)[c0:c0 + step, None]
+        s = s0[c0:c0 + step, None] + u * (s1 - s0)[c0:c0 + step, None]
+        qq = np.einsum("kpj,kpj->kp", q, q)
+        c = np.einsum("kpj,kj->kp", q, across[c0:c0 + step].astype(np.float64)) ** 2
+        c += (np.einsum("kpj,kj->kp", q, d) ** 2 / np.where(L2 > 0, L2, 1.0)[:, None])  # past a clamped end
+        inside = (qq <= np.maximum(r, s) ** 2) & (c * s * s + (qq - c) * r * r <= r * r * s * s)
+        i, j = np.nonzero(inside)
+        seg.append(i + c0)
         pt.append(j)
     return (np.concatenate(seg), np.concatenate(pt)) if seg else (np.zeros(0, np.int64),) * 2
 
 
-def unique_rows(rows: np.ndarray) -> np.ndarray:
+def unique_rows(rows: np.ndarray, return_inverse: bool = False):
     """The distinct rows of a C-contiguous int64 array (in byte order: a sort of fixed-size
-    records, several times faster than ``np.unique(..., axis=0)``)."""
+    records, several times faster than ``np.unique(..., axis=0)``); with ``return_inverse``,
+    also each row's index among them, (k,) int64."""
     rows = np.ascontiguousarray(rows)
-    if len(rows) == 0:
-        return rows
+    if len(rows) == 0 or rows.shape[1] == 0:
+        out = rows[:1] if len(rows) else rows
+        return (out, np.zeros(len(rows), np.int64)) if return_inverse else out
     rec = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    if return_inverse:
+        u, inv = np.unique(rec, return_inverse=True)
+        return u.view(rows.dtype).reshape(-1, rows.shape[1]), inv.ravel().astype(np.int64)
     return np.unique(rec).view(rows.dtype).reshape(-1, rows.shape[1])
