@@ -25,6 +25,12 @@ def _segment_points(k, start, end, r0, r1, s0, s1, across, points, lo, h, dims, 
     L2 = dx * dx + dy * dy + dz * dz
     L = np.sqrt(L2)
     ax_, ay_, az_ = across[k, 0], across[k, 1], across[k, 2]
+    # an elliptic tube: the unit direction n and b = n x a, for the slices' boxes
+    elliptic = ax_ * ax_ + ay_ * ay_ + az_ * az_ > 0.25 and L > 0.0
+    nx_, ny_, nz_ = (dx / L, dy / L, dz / L) if L > 0.0 else (0.0, 0.0, 0.0)
+    bx_ = ny_ * az_ - nz_ * ay_
+    by_ = nz_ * ax_ - nx_ * az_
+    bz_ = nx_ * ay_ - ny_ * ax_
     rmax = max(max(r0[k], r1[k]), max(s0[k], s1[k]))
     # clip [0, 1] to the points' box grown by rmax (slabs)
     u0, u1 = 0.0, 1.0
@@ -58,14 +64,26 @@ def _segment_points(k, start, end, r0, r1, s0, s1, across, points, lo, h, dims, 
         ub = u0 + (j + 1) * du
         um = 0.5 * (ua + ub)
         mx, my, mz = sx + um * dx, sy + um * dy, sz + um * dz
-        reach = max(max(r0[k] + ua * (r1[k] - r0[k]), r0[k] + ub * (r1[k] - r0[k])),
-                    max(s0[k] + ua * (s1[k] - s0[k]), s0[k] + ub * (s1[k] - s0[k]))) + 0.5 * du * L + 1e-9
-        i0 = max(0, int(np.floor((mx - reach - lo[0]) / h)))
-        i1 = min(dims[0] - 1, int(np.floor((mx + reach - lo[0]) / h)))
-        j0 = max(0, int(np.floor((my - reach - lo[1]) / h)))
-        j1 = min(dims[1] - 1, int(np.floor((my + reach - lo[1]) / h)))
-        k0 = max(0, int(np.floor((mz - reach - lo[2]) / h)))
-        k1 = min(dims[2] - 1, int(np.floor((mz + reach - lo[2]) / h)))
+        rm = max(r0[k] + ua * (r1[k] - r0[k]), r0[k] + ub * (r1[k] - r0[k]))
+        sm = max(s0[k] + ua * (s1[k] - s0[k]), s0[k] + ub * (s1[k] - s0[k]))
+        if elliptic:
+            # the box of the slice's piece of elliptic cylinder (semi-axes rm along a, sm along
+            # b) and, at the segment's ends, of its cap (rm along the segment too): per axis
+            # half the slice's length along it plus the ellipse's (or ellipsoid's) half extent
+            cap = rm if (j == 0 or j == nslice - 1) else 0.0
+            hx = 0.5 * du * abs(dx) + np.sqrt((rm * ax_) ** 2 + (sm * bx_) ** 2 + (cap * nx_) ** 2) * (1.0 + 1e-5) + 1e-9
+            hy = 0.5 * du * abs(dy) + np.sqrt((rm * ay_) ** 2 + (sm * by_) ** 2 + (cap * ny_) ** 2) * (1.0 + 1e-5) + 1e-9
+            hz = 0.5 * du * abs(dz) + np.sqrt((rm * az_) ** 2 + (sm * bz_) ** 2 + (cap * nz_) ** 2) * (1.0 + 1e-5) + 1e-9
+        else:
+            hx = max(rm, sm) + 0.5 * du * L + 1e-9
+            hy = hx
+            hz = hx
+        i0 = max(0, int(np.floor((mx - hx - lo[0]) / h)))
+        i1 = min(dims[0] - 1, int(np.floor((mx + hx - lo[0]) / h)))
+        j0 = max(0, int(np.floor((my - hy - lo[1]) / h)))
+        j1 = min(dims[1] - 1, int(np.floor((my + hy - lo[1]) / h)))
+        k0 = max(0, int(np.floor((mz - hz - lo[2]) / h)))
+        k1 = min(dims[2] - 1, int(np.floor((mz + hz - lo[2]) / h)))
         for iz in range(k0, k1 + 1):
             for iy in range(j0, j1 + 1):
                 for ix in range(i0, i1 + 1):

@@ -4,7 +4,7 @@ The exhaustive search (:mod:`wavepaths.search.diffraction`) enumerates every (so
 edge, receiver image) triple that no conservative test rules out. In a dense city most of
 them are occluded: munich at two reflections around the edge keeps some 400,000 candidates
 per receiver for about 15 paths. This module finds candidates in proportion to the paths
-instead, by sampling, in two steps:
+instead, by sampling, in three steps:
 
 1. **Edge samples** (:func:`edge_samples`). For each order ``a`` of reflections before the
    edge, the context's (source image, dihedron) pairs and their windows (the parts of each
@@ -16,13 +16,20 @@ instead, by sampling, in two steps:
    the same window, is lit (so a lit stretch shorter than the spacing still starts a fan).
    No transmitter rays are launched: the sources and windows are the exact engine's, so no
    edge is missed for being seen at a grazing angle.
-2. **Keller fans** (:func:`candidate_sequences`). From every kept sample, ``fan`` rays on
-   the Keller cone of the incident direction (seed §2.1: ``v . w = u . w``), in the
-   wedge's exterior, are traced through up to ``D - a`` specular reflections (first hits
-   from the ray caster, reflected in float64). Every segment carries the sequence
-   (mirrors before, dihedron, mirrors after so far) to the query points within its tube:
-   a radius that grows from the sample spacing by the fan's and the samples' angular
-   spacing, times ``radius_factor``.
+2. **Keller fans** (:func:`fan_segments`, once for the box of the query points). From
+   every kept sample, ``fan`` rays on the Keller cone of the incident direction (seed
+   §2.1: ``v . w = u . w``), in the wedge's exterior, are traced through up to ``D - a``
+   specular reflections (first hits from the ray caster, reflected in float64). The
+   segments whose tubes may reach the box are kept (float32, recentred): a coverage map
+   traces its fans once for all its tiles.
+3. **Tubes** (:func:`candidate_sequences`, per set of points). Every segment carries its
+   sequence (mirrors before, dihedron, mirrors after so far) to the query points within
+   its tube. The tube is an ellipse in cross-section: ``radius_factor`` times the fan's
+   spacing across the cone (the sample spacing plus ``sin(beta) x 2 pi / fan`` per metre
+   of unfolded distance) and times the samples' spacing along it (the sample spacing plus
+   their angular spacing per metre); past the end of a ray stopped by a face, a cap as long
+   as the semi-axis across. On munich the round tubes of the first version carried 28 times the
+   candidates (3.16 M against 111 k on a 1,024-cell strip) for 0.2 % more of the paths.
 
 What comes out is a set of *candidate sequences* per point, not paths: each must still be
 solved exactly (closed-form diffraction point between the two unfolded ends, back-traces,
@@ -349,7 +356,7 @@ class FanSegments:
 
     def covers(self, points: np.ndarray) -> bool:
         """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
-        return bool(len(points) == 0 or (np.all(points.min(axis=0) >= self.lo) and np.all(points.max(axis=0) <= self.hi)))
+        return _in_box(points, self.lo, self.hi)
 
 
 def _reaches_box(origin: np.ndarray, end: np.ndarray, r0: np.ndarray, r1: np.ndarray, lo: np.ndarray,
@@ -557,32 +564,65 @@ def chain_rows(polygons: np.ndarray, query: np.ndarray) -> np.ndarray:
     return np.where(found, order[pos], -1)
 
 
-def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray, rays: int,
-                                   options: LaunchOptions = LaunchOptions()) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per reflection order ``k`` (index ``k - 1``), the (point, chain row of ``ctx.levels[k]``)
-    pairs that launched transmitter rays carry to ``points``.
+@dataclass(frozen=True)
+class RaySegments:
+    """The segments of the transmitter's launched rays whose tubes reach a box of query
+    points, struct of arrays over ``n`` segments (see :class:`FanSegments` for the frame).
 
-    ``rays`` directions from the transmitter (:func:`fibonacci_directions`) are traced through
-    ``max_reflections`` specular reflections; each segment after ``k`` reflections gives its
-    mirror chain to the points within its tube (``radius_factor`` times the rays' angular
-    spacing times the unfolded distance from the transmitter). Chains the context's image
-    tree does not hold (proven hidden) are dropped: the exhaustive search would not test them.
+    Attributes
+    ----------
+    centre, lo, hi : (3,) float64
+        Origin of the float32 coordinates; the box the segments were kept for [m].
+    start, end : (n, 3) float32
+        [m from ``centre``].
+    r0, r1 : (n,) float32
+        Tube radius at each end [m].
+    order : (n,) int64
+        Reflections before the segment (``k >= 1``).
+    chain : (n,) int64
+        Row of its mirror chain in ``ctx.levels[order]``.
     """
-    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+
+    centre: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    r0: np.ndarray
+    r1: np.ndarray
+    order: np.ndarray
+    chain: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.order)
+
+    def covers(self, points: np.ndarray) -> bool:
+        """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
+        return _in_box(points, self.lo, self.hi)
+
+
+def _in_box(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    return bool(len(points) == 0 or (np.all(points.min(axis=0) >= lo) and np.all(points.max(axis=0) <= hi)))
+
+
+def ray_segments(scene: "Scene", ctx: "TxContext", rays: int, lo: np.ndarray, hi: np.ndarray,
+                 options: LaunchOptions = LaunchOptions()) -> RaySegments:
+    """Trace ``rays`` directions from the transmitter (:func:`fibonacci_directions`) through
+    ``max_reflections`` specular reflections, and keep the segments after ``k >= 1``
+    reflections whose tubes (``radius_factor`` times the rays' angular spacing
+    ``sqrt(4 pi / rays)`` times the unfolded distance from the transmitter) may reach the
+    box ``[lo, hi]``. Chains the context's image tree does not hold (proven hidden) are
+    dropped: the exhaustive search would not test them."""
+    lo = np.asarray(lo, dtype=np.float64).reshape(3)
+    hi = np.asarray(hi, dtype=np.float64).reshape(3)
+    centre = 0.5 * (lo + hi)
     K = ctx.options.max_reflections
-    out = [(np.zeros(0, np.int64), np.zeros(0, np.int64)) for _ in range(K)]
-    if K == 0 or len(points) == 0:
-        return out
     if len(ctx.tx) != 1:
         raise WavepathsError("launched candidates take one transmitter per context")
-    from . import kernels
-
-    grid = PointGrid(points) if kernels.available() else None
     far = 2.0 * scene.diagonal
     eps = 1e-6 * scene.diagonal
-    dth = np.sqrt(4.0 * np.pi / rays)
-    grow = options.radius_factor * dth
-    found: list[list[np.ndarray]] = [[] for _ in range(K)]
+    grow = options.radius_factor * np.sqrt(4.0 * np.pi / rays)
+    parts: list[tuple] = []
     directions = fibonacci_directions(rays)
     for s0 in range(0, rays, options.fan_rays):
         u = directions[s0:s0 + options.fan_rays]
@@ -596,20 +636,52 @@ def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.
                 poly, dist = first_hits_past(scene, origin, u, far, eps, chain[:, -1:])
             if k >= 1:
                 end = origin + dist[:, None] * u
-                seg, pt = tube_pairs(origin, end, grow * travelled, grow * (travelled + dist), points, grid)
-                if len(seg):
-                    found[k - 1].append(unique_rows(np.column_stack([pt, chain[seg]])))
+                r0, r1 = grow * travelled, grow * (travelled + dist)
+                keep = np.nonzero(_reaches_box(origin, end, r0, r1, lo, hi))[0]
+                row = chain_rows(ctx.levels[k].polygons, chain[keep]) if len(keep) else np.zeros(0, np.int64)
+                keep, row = keep[row >= 0], row[row >= 0]
+                parts.append((origin[keep] - centre, end[keep] - centre, r0[keep], r1[keep],
+                              np.full(len(keep), k, np.int64), row))
             hit = poly >= 0
             if k == K or not hit.any():
                 break
             sel, mirror, origin, u, travelled = reflect_and_branch(scene, origin, u, poly, dist, travelled,
                                                                    0.0, grow, options.radius_factor)
             chain = np.column_stack([chain[sel], mirror])
+    if parts:
+        cols = [np.concatenate(c) for c in zip(*parts)]
+    else:
+        cols = [np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
+                np.zeros(0, np.int64)]
+    f32 = np.float32
+    return RaySegments(centre, lo, hi, cols[0].astype(f32), cols[1].astype(f32), cols[2].astype(f32),
+                       cols[3].astype(f32), cols[4], cols[5])
+
+
+def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray, rays: int,
+                                   options: LaunchOptions = LaunchOptions(),
+                                   segments: RaySegments | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per reflection order ``k`` (index ``k - 1``), the (point, chain row of ``ctx.levels[k]``)
+    pairs that launched transmitter rays carry to ``points``: each segment of
+    :func:`ray_segments` (traced for the points' own box when ``segments`` is not given)
+    gives its mirror chain to the points within its tube."""
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    K = ctx.options.max_reflections
+    out = [(np.zeros(0, np.int64), np.zeros(0, np.int64)) for _ in range(K)]
+    if K == 0 or len(points) == 0:
+        return out
+    if segments is None:
+        segments = ray_segments(scene, ctx, rays, points.min(axis=0), points.max(axis=0), options)
+    elif not segments.covers(points):
+        raise WavepathsError("the ray segments were kept for a box that does not hold every query point")
+    from . import kernels
+
+    local = points - segments.centre
+    grid = PointGrid(local) if kernels.available() else None
+    seg, pt = tube_pairs(segments.start, segments.end, segments.r0, segments.r1, local, grid)
     for k in range(1, K + 1):
-        if not found[k - 1]:
-            continue
-        rows = unique_rows(np.concatenate(found[k - 1]))
-        c = chain_rows(ctx.levels[k].polygons, rows[:, 1:])
-        ok = c >= 0
-        out[k - 1] = (rows[ok, 0], c[ok])
+        sel = segments.order[seg] == k
+        if sel.any():
+            rows = unique_rows(np.column_stack([pt[sel], segments.chain[seg[sel]]]))
+            out[k - 1] = (rows[:, 0], rows[:, 1])
     return out

@@ -32,7 +32,7 @@ from .diffraction import _diffraction_candidates, _diffraction_prefilter
 from .end_sides import _EndSide, _edge_frame, _sector_in_table, _transmitter_side
 from .geometry import mirror_points
 from .images import ImageLevel
-from .launch import EdgeSamples, FanSegments, LaunchOptions, candidate_sequences, edge_samples, fan_segments
+from .launch import EdgeSamples, LaunchOptions, candidate_sequences, edge_samples, fan_segments, ray_segments
 from .paths import PathBatch
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -59,26 +59,33 @@ def context_samples(scene: "Scene", ctx: "TxContext") -> EdgeSamples:
     return got
 
 
-def prepare_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray) -> FanSegments | None:
-    """Trace the context's Keller fans once for every query point to come (a coverage map's
-    cells, a path query's receivers) and keep them in ``ctx.derived``, so that the tiles of
-    ``points`` query them instead of tracing the fans again (:func:`launched_diffraction`).
+def prepare_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray) -> None:
+    """Trace the context's launched rays once for every query point to come (a coverage
+    map's cells, a path query's receivers) and keep them in ``ctx.derived``, so that the
+    tiles of ``points`` query them instead of tracing them again.
 
-    Does nothing (returns ``None``) unless ``ctx.options.diffraction_candidates ==
-    "launched"``. The segments are those whose tubes reach the box of ``points``
-    (:func:`~wavepaths.search.launch.fan_segments`); a tile outside that box traces its own.
+    With ``diffraction_candidates="launched"``: the Keller fans
+    (:func:`~wavepaths.search.launch.fan_segments`, key ``("launch_fans", launch_fan)``);
+    with ``reflection_candidates="launched"``: the transmitter's rays
+    (:func:`~wavepaths.search.launch.ray_segments`, key ``("launch_rays", launch_rays)``).
+    The segments kept are those whose tubes reach the box of ``points``; a tile outside
+    that box traces its own. Does nothing in the exhaustive modes.
     """
-    if not (ctx.options.diffraction and ctx.options.diffraction_candidates == "launched") or len(points) == 0:
-        return None
+    opts = ctx.options
+    if len(points) == 0:
+        return
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    key = ("launch_fans", ctx.options.launch_fan)
-    got = ctx.derived.get(key)
-    if got is not None and got.covers(points):
-        return got
-    got = fan_segments(scene, ctx, points.min(axis=0), points.max(axis=0), launch_options(ctx),
-                       context_samples(scene, ctx))
-    ctx.derived[key] = got
-    return got
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    if opts.diffraction and opts.diffraction_candidates == "launched":
+        key = ("launch_fans", opts.launch_fan)
+        got = ctx.derived.get(key)
+        if got is None or not got.covers(points):
+            ctx.derived[key] = fan_segments(scene, ctx, lo, hi, launch_options(ctx), context_samples(scene, ctx))
+    if opts.reflection_candidates == "launched" and opts.max_reflections >= 1:
+        key = ("launch_rays", opts.launch_rays)
+        got = ctx.derived.get(key)
+        if got is None or not got.covers(points):
+            ctx.derived[key] = ray_segments(scene, ctx, opts.launch_rays, lo, hi, launch_options(ctx))
 
 
 def receiver_images(scene: "Scene", rx: np.ndarray, point: np.ndarray, after: np.ndarray) -> ImageLevel:
