@@ -77,7 +77,9 @@ def munich_map(progress_file: str, cell_size: float = 2.0, options: dict | None 
     return {"load_s": load_s, "map_s": map_s, "total_s": load_s + map_s, "cells": grid.num_cells,
             "cells_traced": int(m.metadata["cells_traced"]), "shape": list(grid.shape), "timings": m.timings,
             "scene": info, "options": {k: getattr(opts, k) for k in ("max_reflections", "diffraction",
-                                                                      "diffraction_reflections")},
+                                                                      "diffraction_reflections",
+                                                                      "diffraction_candidates",
+                                                                      "reflection_candidates")},
             "stats": {k: int(v) for k, v in m.stats.items()},
             "reached_fraction": float(np.isfinite(m.path_gain_db())[~m.inside].mean())}
 
@@ -153,15 +155,102 @@ def munich_sample(progress_file: str, cell_size: float = 2.0, options: dict | No
     return out
 
 
+def munich_check(progress_file: str, cells: int = 32, seed: int = 7, cell_size: float = 2.0,
+                 options: dict | None = None) -> dict:
+    """How much the launched candidates miss on munich (runs in a child process).
+
+    ``cells`` random active cells of the map's grid (``seed``) are traced twice from one
+    transmitter context with the target's settings: the exhaustive search, then launched
+    candidates (:data:`LAUNCHED_OPTIONS`, the fans traced for these cells only). Both sets
+    of paths get their fields (3.5 GHz, the map's defaults), and the report compares them:
+    the paths the launched search misses (by type), any it finds that the exhaustive one
+    does not (there should be none: the tests are the same), the share of the power
+    missed, and each cell's total power difference [dB].
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from ..coverage import PlanarGrid
+    from ..coverage.inside import inside_solid_objects, solid_objects
+    from ..fields import FieldConfig, compute_fields
+    from ..scene import load_scene
+    from ..search import TraceOptions, trace
+    from ..search.context import build_tx_context
+    from .scenes import sionna_scene_xml
+
+    base = {k: v for k, v in (options or LAUNCHED_OPTIONS).items() if not k.endswith("_candidates")}
+    ex_opts = TraceOptions(**base)
+    la_opts = TraceOptions(**(options or LAUNCHED_OPTIONS))
+    state: dict = {"stage": "load", "t0": time.time()}
+    _write(progress_file, state)
+    scene = load_scene(sionna_scene_xml("munich"))
+    grid = PlanarGrid.footprint(scene, cell_size, 1.5)
+    flat = grid.cell_centers().reshape(-1, 3)
+    active = np.nonzero(~inside_solid_objects(scene, flat, solid_objects(scene)))[0]
+    pick = np.sort(np.random.default_rng(seed).choice(active, min(cells, len(active)), replace=False))
+    rx = flat[pick]
+    tx = np.array([MUNICH_TX])
+    state.update(stage="context")
+    _write(progress_file, state)
+    t = time.perf_counter()
+    ctx = build_tx_context(scene, tx, ex_opts)
+    context_s = time.perf_counter() - t
+    state.update(stage="exhaustive", context_s=context_s)
+    _write(progress_file, state)
+    t = time.perf_counter()
+    ex = trace(scene, tx, rx, ex_opts, context=ctx)
+    ex_s = time.perf_counter() - t
+    state.update(stage="launched", exhaustive_s=ex_s)
+    _write(progress_file, state)
+    lctx = dataclasses.replace(ctx, options=la_opts, derived={})
+    t = time.perf_counter()
+    la = trace(scene, tx, rx, la_opts, context=lctx)
+    la_s = time.perf_counter() - t
+    cfg = FieldConfig(3.5e9)
+
+    def keyed(p):
+        power = np.abs(compute_fields(scene, p, cfg).a) ** 2
+        keys = [(int(p.rx_index[i]), tuple(int(v) for v in p.interactions[i]), tuple(int(v) for v in p.primitive[i]))
+                for i in range(len(p.rx_index))]
+        total = np.bincount(p.rx_index, power, len(rx))
+        return dict(zip(keys, power.tolist())), total
+
+    ke, te = keyed(ex)
+    kl, tl = keyed(la)
+    missed = set(ke) - set(kl)
+    kinds: dict[str, int] = {}
+    names = {1: "R", 2: "D"}
+    for k in missed:
+        label = "-".join(names.get(v, "?") for v in k[1] if v != 0) or "LoS"
+        kinds[label] = kinds.get(label, 0) + 1
+    reached = te > 0
+    err = np.abs(10 * np.log10(np.maximum(tl[reached], 1e-300) / te[reached]))
+    out = {"cells": int(len(rx)), "seed": seed, "cell_rows": pick.tolist(), "context_s": context_s,
+           "exhaustive_s": ex_s, "launched_s": la_s, "paths_exhaustive": len(ke), "paths_launched": len(kl),
+           "missed": len(missed), "extra": len(set(kl) - set(ke)), "missed_by_type": kinds,
+           "missed_power_fraction": float(sum(ke[k] for k in missed) / max(sum(ke.values()), 1e-300)),
+           "cells_reached": int(reached.sum()),
+           "max_cell_error_db": float(err.max()) if len(err) else 0.0,
+           "median_cell_error_db": float(np.median(err)) if len(err) else 0.0,
+           "launched_candidates": int(la.stats.get("launched_candidates", 0))}
+    state.update(stage="done")
+    _write(progress_file, state)
+    return out
+
+
 def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARGET_BYTES, cell_size: float = 2.0,
                options: dict | None = None, probe: bool = True, probe_timeout_s: float = 900.0,
                progress=print, sample_first: bool = True, sample_timeout_s: float = 900.0,
-               sample_cells: int = 16, launched_sample: bool = True) -> dict:
+               sample_cells: int = 16, launched: bool = True, check_cells: int = 32) -> dict:
     """Run the munich map once in a child process; report how far it got.
 
-    With ``launched_sample`` (and the target's settings), first a sample of the target's
-    settings with launched candidates (:data:`LAUNCHED_OPTIONS`, two tiles of 2,048 cells),
-    reported under ``"launched"``.
+    With ``launched`` (and the target's settings), first the whole map with launched
+    candidates (:data:`LAUNCHED_OPTIONS`, :func:`munich_map` on the default workers, within
+    ``timeout_s``), reported under ``"launched"`` with its own ``meets_target`` (time, and the
+    peak of the summed resident memory of the map's process and its workers); then, with
+    ``check_cells``, what the launched candidates miss there (:func:`munich_check`, under
+    ``"launched_check"``).
 
     With ``sample_first``, a child first builds the transmitter context and traces two strips
     of ``sample_cells`` cells (:func:`munich_sample`, limited to ``sample_timeout_s``; at R2+D2
@@ -178,18 +267,29 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
         return {"skipped": "Sionna RT is not installed (its munich scene ships with it)"}
     os.makedirs(out_dir, exist_ok=True)
     pfile = os.path.join(out_dir, "munich_progress.json")
-    launched = None
-    if launched_sample and options is None:
-        # the target's settings with launched candidates: context, then two tiles of 2,048 cells
-        progress(f"munich: launched candidates, context and two tiles (limit {sample_timeout_s:g} s)")
+    launched_out = None
+    if launched and options is None:
+        # the target's settings with launched candidates: the whole map, then a check of what
+        # the launch misses against the exhaustive search on random cells
+        progress(f"munich: the map with launched candidates (limit {timeout_s:g} s)")
         lfile = os.path.join(out_dir, "munich_launched_progress.json")
-        rl = run_isolated("wavepaths.bench.munich", "munich_sample",
-                          {"progress_file": lfile, "cell_size": cell_size, "options": LAUNCHED_OPTIONS,
-                           "cells": 2048},
-                          timeout_s=sample_timeout_s, memory_limit_bytes=memory_limit)
-        launched = dict(rl["result"]) if rl["ok"] else {"error": rl.get("error"), "timed_out": rl.get("timed_out", False)}
-        launched["wall_s"] = rl["wall_s"]
-        launched["options"] = LAUNCHED_OPTIONS
+        rl = run_isolated("wavepaths.bench.munich", "munich_map",
+                          {"progress_file": lfile, "cell_size": cell_size, "options": LAUNCHED_OPTIONS},
+                          timeout_s=timeout_s, memory_limit_bytes=memory_limit)
+        launched_out = dict(rl["result"]) if rl["ok"] else {"error": rl.get("error"),
+                                                            "timed_out": rl.get("timed_out", False)}
+        launched_out.update(wall_s=rl["wall_s"], options=LAUNCHED_OPTIONS, finished=bool(rl["ok"]),
+                            max_rss_bytes=rl.get("max_rss_bytes"), max_group_rss_bytes=rl.get("max_group_rss_bytes"))
+        launched_out["meets_target"] = bool(rl["ok"] and launched_out["total_s"] <= TARGET_S
+                                            and (rl.get("max_group_rss_bytes") or 0) <= TARGET_BYTES)
+        if check_cells:
+            progress(f"munich: launched against exhaustive on {check_cells} random cells (limit {sample_timeout_s:g} s)")
+            cfile = os.path.join(out_dir, "munich_check_progress.json")
+            rc = run_isolated("wavepaths.bench.munich", "munich_check",
+                              {"progress_file": cfile, "cells": check_cells, "cell_size": cell_size},
+                              timeout_s=sample_timeout_s, memory_limit_bytes=memory_limit)
+            launched_out["check"] = dict(rc["result"]) if rc["ok"] else {"error": rc.get("error"),
+                                                                         "timed_out": rc.get("timed_out", False)}
     sample = None
     if sample_first:
         progress(f"munich: context and one tile first (limit {sample_timeout_s:g} s)")
@@ -211,11 +311,11 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
             out = {"options": options or "target (R2+D2)", "target_s": TARGET_S, "target_bytes": TARGET_BYTES,
                    "timeout_s": timeout_s, "memory_limit_bytes": memory_limit, "tx": list(MUNICH_TX),
                    "cell_size_m": cell_size, "finished": False, "meets_target": False, "full_map_skipped": why,
-                   "sample": sample, "launched": launched}
+                   "sample": sample, "launched": launched_out}
             if probe and options is None:
                 progress("munich: probing first order (R1+D0) to see where the scene stands")
                 out["probe"] = run_munich(out_dir, timeout_s=probe_timeout_s, memory_limit=memory_limit,
-                                          cell_size=cell_size, probe=False, progress=progress, launched_sample=False,
+                                          cell_size=cell_size, probe=False, progress=progress, launched=False,
                                           options={"max_reflections": 1, "diffraction": True,
                                                    "diffraction_reflections": 0},
                                           sample_timeout_s=min(sample_timeout_s, probe_timeout_s))
@@ -233,8 +333,8 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
            "finished": bool(r["ok"]), "wall_s": r["wall_s"], "last_progress": state}
     if sample is not None:
         out["sample"] = sample
-    if launched is not None:
-        out["launched"] = launched
+    if launched_out is not None:
+        out["launched"] = launched_out
     if r["ok"]:
         out.update(r["result"])
         out["max_rss_bytes"] = r["max_rss_bytes"]
@@ -251,6 +351,6 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
         if probe and options is None:
             progress("munich: the target settings failed; probing first order (R1+D0) to see where the scene stands")
             out["probe"] = run_munich(out_dir, timeout_s=probe_timeout_s, memory_limit=memory_limit,
-                                      cell_size=cell_size, probe=False, progress=progress, launched_sample=False,
+                                      cell_size=cell_size, probe=False, progress=progress, launched=False,
                                       options={"max_reflections": 1, "diffraction": True, "diffraction_reflections": 0})
     return out

@@ -113,6 +113,7 @@ def headline(results: dict) -> dict:
         "path curve below-left of Sionna (paths)": paths_verdict.get("every_sionna_point_beaten"),
         "diffraction_cost_ratio <= 3": _ok(head["diffraction_cost_ratio"], lambda v: v <= 3),
         "munich < 10 min and < 8 GB": munich.get("meets_target") if munich and "skipped" not in munich else None,
+        "munich < 10 min and < 8 GB (launched candidates)": (munich.get("launched") or {}).get("meets_target"),
     }
     return head
 
@@ -441,6 +442,18 @@ interleaved round by round, and reported as medians over the rounds.</p>
     mu = res.get("munich")
     if mu:
         parts.append("<h2>Scale: munich (optional)</h2>")
+        la = mu.get("launched") or {}
+        if la.get("finished"):
+            ck = la.get("check") or {}
+            parts.append(_table([[
+                f"{la.get('total_s', 0):.0f}", f"{(la.get('timings') or {}).get('context_s', 0):.0f}",
+                f"{(la.get('timings') or {}).get('launch_s', 0):.0f}", f"{(la.get('timings') or {}).get('tiles_s', 0):.0f}",
+                f"{(la.get('max_group_rss_bytes') or 0) / 2**30:.2f}", la.get("cells_traced"),
+                f"{ck.get('paths_launched')} of {ck.get('paths_exhaustive')}" if ck.get("paths_exhaustive") else "-",
+                f"{ck.get('max_cell_error_db', float('nan')):.2g}" if ck.get("paths_exhaustive") else "-",
+                la.get("meets_target")]],
+                ["map [s]", "context [s]", "launch [s]", "tiles [s]", "peak memory, process and workers [GiB]",
+                 "cells", "paths found on the check cells", "worst cell error [dB]", "meets target"]))
         parts.append("<pre>" + html.escape(json.dumps({k: v for k, v in mu.items() if k != "stats"}, indent=1,
                                                        default=_json_default)) + "</pre>")
     if summary.get("profiles"):
