@@ -357,3 +357,30 @@ def test_a_launched_map_equals_the_exhaustive_map(canyon):
     np.testing.assert_allclose(la.path_gain_db(), ex.path_gain_db(), rtol=0, atol=1e-9, equal_nan=True)
     ctx = build_tx_context(canyon, np.array([[-60.0, 0, 10]]), launched)
     assert auto_tile_size(ctx, 20000, 2) == 2048 and auto_tile_size(ctx, 300, 1) == 300
+    # in square tiles of at most 16 cells (4 x 4 blocks), the same map
+    sq = coverage(canyon, [[-60, 0, 10]], grid, launched, settings=CoverageOptions(workers=1, tile_size=16))
+    assert sq.metadata["tiles"] >= 8
+    np.testing.assert_allclose(sq.path_gain_db(), ex.path_gain_db(), rtol=0, atol=1e-9, equal_nan=True)
+
+
+def test_block_tiles_cover_every_active_cell_once_in_compact_squares():
+    """A 37 x 53 grid with a hole: every active cell in exactly one tile, none larger than
+    the size, and every tile inside a run of squares of one row of squares (at most
+    ``floor(sqrt(size))`` grid rows tall); a 1-D grid gets runs of consecutive cells."""
+    from wavepaths.coverage.solver import block_tiles
+
+    ny, nx, size = 37, 53, 50
+    flat = np.arange(ny * nx)
+    r, c = np.divmod(flat, nx)
+    active = flat[~((r > 10) & (r < 20) & (c > 5) & (c < 30))]
+    tiles = block_tiles((ny, nx), active, size)
+    got = np.concatenate(tiles)
+    assert len(got) == len(active) and set(got.tolist()) == set(active.tolist())
+    side = int(np.sqrt(size))
+    for t in tiles:
+        assert 0 < len(t) <= size
+        rows = t // nx
+        assert rows.max() - rows.min() < side and len(set((rows // side).tolist())) == 1
+    assert max(len(t) for t in tiles) > side * side // 2
+    runs = block_tiles((ny * nx,), active, size)
+    assert [len(t) for t in runs[:-1]] == [size] * (len(runs) - 1)

@@ -125,9 +125,9 @@ def block_tiles(shape: tuple[int, ...], active: np.ndarray, size: int) -> list[n
     groups = np.split(cells, bounds)
     tiles: list[np.ndarray] = []
     run: list[np.ndarray] = []
-    count = 0
-    row_of = [int(g[0] // nx) // side for g in groups]
-    for g, r in zip(groups, row_of):
+    count, run_row = 0, -1
+    for g in groups:
+        r = int(g[0] // nx) // side  # the row of squares
         if run and (count + len(g) > size or r != run_row):
             tiles.append(np.concatenate(run))
             run, count = [], 0

@@ -521,7 +521,6 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
         Distinct rows (point, before, dihedron, after).
     """
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    Dmax = ctx.options.diffraction_reflections
     if segments is None:
         lo, hi = (points.min(axis=0), points.max(axis=0)) if len(points) else (np.zeros(3), np.zeros(3))
         segments = fan_segments(scene, ctx, lo, hi, options, samples)
