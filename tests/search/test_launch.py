@@ -226,7 +226,7 @@ def test_fibonacci_directions_cover_the_sphere_evenly():
 
 
 def test_chain_rows_look_up_chains():
-    from wavepaths.search.launch import chain_rows
+    from wavepaths.search.txrays import chain_rows
 
     table = np.array([[3, 1], [0, 2], [5, 5], [1, 3]])
     got = chain_rows(table, np.array([[1, 3], [2, 0], [5, 5], [3, 1]]))
@@ -296,7 +296,7 @@ def test_a_tube_the_box_test_drops_reaches_no_point_of_the_box(rng):
     """``_reaches_box`` is conservative: of random segments with growing radii, those it
     drops have no point of a dense cloud in the box within their tube, and it drops most
     segments that rise away from a flat box."""
-    from wavepaths.search.launch import _reaches_box
+    from wavepaths.search.tubes import reaches_box as _reaches_box
 
     lo, hi = np.array([-20.0, -10.0, 1.0]), np.array([20.0, 10.0, 2.0])
     S = rng.uniform(-40, 40, (3000, 3))

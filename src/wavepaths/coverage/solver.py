@@ -97,9 +97,9 @@ TILE_IMAGE_BUDGET = 1 << 22  # receiver images held by one tile, for the automat
 
 
 LAUNCHED_TILE_MAX = 2048
-"""Cells per tile at most with launched candidates: munich at R2+D2 carries about 3,000
-candidate sequences per cell (80 bytes each), and a 2,048-cell tile peaked at 3.8 GB with
-the context (docs/benchmarks.md, sixteenth session)."""
+"""Cells per tile at most with launched candidates: every tile scans all the fan segments
+traced for the map (munich: 6.26 M, about 0.75 s per tile), so tiles are large; a 2,048-cell
+munich square holds about 150,000 candidates (docs/benchmarks.md, seventeenth session)."""
 
 
 def block_tiles(shape: tuple[int, ...], active: np.ndarray, size: int) -> list[np.ndarray]:
@@ -150,8 +150,8 @@ def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> in
     With several workers, tiles are also small enough to give each worker two.
     """
     if ctx.options.diffraction_candidates == "launched" or ctx.options.reflection_candidates == "launched":
-        # launched candidates: no receiver image trees, and every tile traces the fans and rays
-        # again, so the tiles are as large as the workers allow
+        # launched candidates: no receiver image trees, and every tile scans all the rays
+        # traced for the map, so the tiles are as large as the workers allow
         w = 1 if workers == 1 else (workers or default_workers())
         return int(np.clip(-(-cells // w), 16, LAUNCHED_TILE_MAX))
     per_rx = 1

@@ -71,9 +71,10 @@ def _segment_points(k, start, end, r0, r1, s0, s1, across, points, lo, h, dims, 
             # b) and, at the segment's ends, of its cap (rm along the segment too): per axis
             # half the slice's length along it plus the ellipse's (or ellipsoid's) half extent
             cap = rm if (j == 0 or j == nslice - 1) else 0.0
-            hx = 0.5 * du * abs(dx) + np.sqrt((rm * ax_) ** 2 + (sm * bx_) ** 2 + (cap * nx_) ** 2) * (1.0 + 1e-5) + 1e-9
-            hy = 0.5 * du * abs(dy) + np.sqrt((rm * ay_) ** 2 + (sm * by_) ** 2 + (cap * ny_) ** 2) * (1.0 + 1e-5) + 1e-9
-            hz = 0.5 * du * abs(dz) + np.sqrt((rm * az_) ** 2 + (sm * bz_) ** 2 + (cap * nz_) ** 2) * (1.0 + 1e-5) + 1e-9
+            grow = 1.0 + 1e-5  # float32 frames are unit and normal to 1e-7
+            hx = 0.5 * du * abs(dx) + np.sqrt((rm * ax_) ** 2 + (sm * bx_) ** 2 + (cap * nx_) ** 2) * grow + 1e-9
+            hy = 0.5 * du * abs(dy) + np.sqrt((rm * ay_) ** 2 + (sm * by_) ** 2 + (cap * ny_) ** 2) * grow + 1e-9
+            hz = 0.5 * du * abs(dz) + np.sqrt((rm * az_) ** 2 + (sm * bz_) ** 2 + (cap * nz_) ** 2) * grow + 1e-9
         else:
             hx = max(rm, sm) + 0.5 * du * L + 1e-9
             hy = hx

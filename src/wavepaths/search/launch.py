@@ -50,8 +50,8 @@ import numpy as np
 from ..errors import WavepathsError
 from .chains import occluded_chains
 from .images import backtrace
-from .rays import fibonacci_directions, first_hits, first_hits_past, reflect_and_branch
-from .tubes import PointGrid, tube_pairs, unique_rows
+from .rays import first_hits_past, reflect_and_branch
+from .tubes import BoxSegments, PointGrid, reaches_box, tube_pairs, unique_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -294,49 +294,27 @@ def _fan_chunks(samples: EdgeSamples, fan: int, fan_rays: int) -> Iterator[np.nd
 
 
 @dataclass(frozen=True)
-class FanSegments:
-    """The segments of the Keller fans' rays whose tubes reach a box of query points, struct
-    of arrays over ``n`` segments and ``m`` distinct sequences.
+class FanSegments(BoxSegments):
+    """The segments of the Keller fans' rays whose tubes reach a box of query points
+    (:class:`~wavepaths.search.tubes.BoxSegments`: ``centre``, ``lo``, ``hi``, ``start``,
+    ``end``, and ``r0``, ``r1`` the semi-axis of the tube across the Keller cone, the fan's
+    spacing), over ``n`` segments and ``m`` distinct sequences.
 
     Traced once (:func:`fan_segments`) and queried by any set of points in the box
     (:func:`candidate_sequences`): a coverage map traces its fans once for all its tiles.
-    The coordinates are float32 offsets from ``centre`` (recentred, so that float32 keeps
-    about 0.1 mm within a few kilometres of it; the tubes are at least ``2 x spacing`` wide).
 
     Attributes
     ----------
-    centre : (3,) float64
-        Origin of the float32 coordinates [m].
-    lo, hi : (3,) float64
-        The box the segments were kept for [m].
-    start, end : (n, 3) float32
-        Ends of each segment [m from ``centre``].
-    r0, r1 : (n,) float32
-        Semi-axis of the tube across the Keller cone (the fan's spacing) at each end [m].
     s0, s1 : (n,) float32
         Semi-axis along the cone's other normal direction (the samples' spacing) [m].
     across : (n, 3) float32
         Unit vector normal to the segment across the cone (mirrored with the ray).
     sequence : (n,) int32
         Row of the segment's sequence in the tables below.
-    order : (m,) int64
-        Reflections before the edge (``a``).
-    source : (m,) int64
-        Row in ``ctx.diffraction_sources[order]``.
-    before : (m, D) int64
-        Mirrors before the edge in path order, ``-1`` padded.
-    dihedron : (m,) int64
-    after : (m, D) int64
-        Mirrors after the edge in path order, ``-1`` padded.
+    order, source, before, dihedron, after : (m,) and (m, D) int64
+        The sequences, as in :class:`CandidateSequences`.
     """
 
-    centre: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-    start: np.ndarray
-    end: np.ndarray
-    r0: np.ndarray
-    r1: np.ndarray
     s0: np.ndarray
     s1: np.ndarray
     across: np.ndarray
@@ -346,40 +324,6 @@ class FanSegments:
     before: np.ndarray
     dihedron: np.ndarray
     after: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.sequence)
-
-    @property
-    def nbytes(self) -> int:
-        return int(sum(getattr(self, f).nbytes for f in self.__dataclass_fields__))
-
-    def covers(self, points: np.ndarray) -> bool:
-        """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
-        return _in_box(points, self.lo, self.hi)
-
-
-def _reaches_box(origin: np.ndarray, end: np.ndarray, r0: np.ndarray, r1: np.ndarray, lo: np.ndarray,
-                 hi: np.ndarray) -> np.ndarray:
-    """(k,) bool: the tube of segment ``origin -> end``, radius ``r0`` to ``r1`` (linear in the
-    segment's parameter ``u``), may reach the box ``[lo, hi]``: some ``u`` in [0, 1] has every
-    coordinate within the radius of the box, ``lo - r(u) <= x(u) <= hi + r(u)`` (conservative:
-    the box grown by a cube of the radius, not a sphere). Each of the six conditions is linear
-    in ``u``, so the ``u`` that pass form one interval (a ray rising from a roof, whose tube
-    widens slower than it climbs, never comes down to the receivers)."""
-    d = end - origin
-    dr = r1 - r0
-    u0 = np.zeros(len(origin))
-    u1 = np.ones(len(origin))
-    for ax in range(3):
-        # x + r >= lo  and  x - r <= hi, i.e. a u <= b for (a, b) below
-        for a, b in ((-(d[:, ax] + dr), origin[:, ax] + r0 - lo[ax]), (d[:, ax] - dr, hi[ax] + r0 - origin[:, ax])):
-            with np.errstate(divide="ignore", invalid="ignore"):
-                bound = b / a
-            u1 = np.where(a > 0, np.minimum(u1, bound), u1)
-            u0 = np.where(a < 0, np.maximum(u0, bound), u0)
-            u1 = np.where((a == 0) & (b < 0), -1.0, u1)
-    return u0 <= u1
 
 
 def fan_segments(scene: "Scene", ctx: "TxContext", lo: np.ndarray, hi: np.ndarray,
@@ -455,10 +399,12 @@ def fan_segments(scene: "Scene", ctx: "TxContext", lo: np.ndarray, hi: np.ndarra
             t1 = travelled + dist
             r0, r1 = base + grow_r * travelled, base + grow_r * t1
             s0, s1 = base + grow_s * travelled, base + grow_s * t1
-            keep = np.nonzero(_reaches_box(origin, end, np.maximum(r0, s0), np.maximum(r1, s1), lo, hi))[0]
+            keep = np.nonzero(reaches_box(origin, end, np.maximum(r0, s0), np.maximum(r1, s1), lo, hi))[0]
             if len(keep):
-                parts.append((origin[keep] - centre, end[keep] - centre, r0[keep], r1[keep], s0[keep], s1[keep],
-                               across[keep], sample[keep], after[keep]))
+                f32 = np.float32  # stored as float32 at once: munich keeps 6 M segments
+                parts.append(((origin[keep] - centre).astype(f32), (end[keep] - centre).astype(f32),
+                              r0[keep].astype(f32), r1[keep].astype(f32), s0[keep].astype(f32), s1[keep].astype(f32),
+                              across[keep].astype(f32), sample[keep], after[keep]))
             hit = poly >= 0
             if b == Dmax or not hit.any():
                 break
@@ -485,9 +431,8 @@ def fan_segments(scene: "Scene", ctx: "TxContext", lo: np.ndarray, hi: np.ndarra
     rep = sample[first]
     before = np.full((len(table), Dmax), -1, np.int64)
     before[:, :min(A, Dmax)] = samples.chain[rep][:, :min(A, Dmax)]
-    f32 = np.float32
-    return FanSegments(centre, lo, hi, start.astype(f32), end.astype(f32), r0.astype(f32), r1.astype(f32),
-                       s0.astype(f32), s1.astype(f32), across.astype(f32), inverse.astype(np.int32),
+    start, end, r0, r1, s0, s1, across = (x.astype(np.float32, copy=False) for x in (start, end, r0, r1, s0, s1, across))
+    return FanSegments(centre, lo, hi, start, end, r0, r1, s0, s1, across, inverse.astype(np.int32),
                        table[:, 0].copy(), table[:, 1].copy(), before, samples.dihedron[rep], table[:, 2:].copy())
 
 
@@ -499,7 +444,7 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
                         options: LaunchOptions = LaunchOptions(),
                         samples: EdgeSamples | None = None,
                         segments: FanSegments | None = None) -> CandidateSequences:
-    """The diffracted sequences whose Keller fans pass near each of ``points`` (step 2).
+    """The diffracted sequences whose Keller fans pass near each of ``points`` (step 3).
 
     Parameters
     ----------
@@ -542,145 +487,3 @@ def candidate_sequences(scene: "Scene", ctx: "TxContext", points: np.ndarray,
     q = k % m
     return CandidateSequences(k // m, segments.order[q], segments.source[q], segments.before[q],
                               segments.dihedron[q], segments.after[q])
-
-
-def chain_rows(polygons: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """(q,) int64: the row of ``polygons`` (c, k) equal to each row of ``query`` (q, k), -1 if none."""
-    c, k = polygons.shape
-    if len(query) == 0 or c == 0:
-        return np.full(len(query), -1, np.int64)
-    if k == 0:
-        return np.zeros(len(query), np.int64)
-    both = unique_rows(np.ascontiguousarray(polygons, dtype=np.int64))
-    if len(both) != c:  # one chain per row (a single source): otherwise not a lookup
-        raise WavepathsError("chain_rows needs distinct chains (one transmitter per context)")
-    rec = np.dtype((np.void, 8 * k))
-    table = np.ascontiguousarray(polygons, dtype=np.int64).view(rec).ravel()
-    order = np.argsort(table)
-    q = np.ascontiguousarray(query, dtype=np.int64).view(rec).ravel()
-    pos = np.minimum(np.searchsorted(table[order], q), c - 1)
-    found = table[order][pos] == q
-    return np.where(found, order[pos], -1)
-
-
-@dataclass(frozen=True)
-class RaySegments:
-    """The segments of the transmitter's launched rays whose tubes reach a box of query
-    points, struct of arrays over ``n`` segments (see :class:`FanSegments` for the frame).
-
-    Attributes
-    ----------
-    centre, lo, hi : (3,) float64
-        Origin of the float32 coordinates; the box the segments were kept for [m].
-    start, end : (n, 3) float32
-        [m from ``centre``].
-    r0, r1 : (n,) float32
-        Tube radius at each end [m].
-    order : (n,) int64
-        Reflections before the segment (``k >= 1``).
-    chain : (n,) int64
-        Row of its mirror chain in ``ctx.levels[order]``.
-    """
-
-    centre: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-    start: np.ndarray
-    end: np.ndarray
-    r0: np.ndarray
-    r1: np.ndarray
-    order: np.ndarray
-    chain: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.order)
-
-    def covers(self, points: np.ndarray) -> bool:
-        """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
-        return _in_box(points, self.lo, self.hi)
-
-
-def _in_box(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
-    return bool(len(points) == 0 or (np.all(points.min(axis=0) >= lo) and np.all(points.max(axis=0) <= hi)))
-
-
-def ray_segments(scene: "Scene", ctx: "TxContext", rays: int, lo: np.ndarray, hi: np.ndarray,
-                 options: LaunchOptions = LaunchOptions()) -> RaySegments:
-    """Trace ``rays`` directions from the transmitter (:func:`fibonacci_directions`) through
-    ``max_reflections`` specular reflections, and keep the segments after ``k >= 1``
-    reflections whose tubes (``radius_factor`` times the rays' angular spacing
-    ``sqrt(4 pi / rays)`` times the unfolded distance from the transmitter) may reach the
-    box ``[lo, hi]``. Chains the context's image tree does not hold (proven hidden) are
-    dropped: the exhaustive search would not test them."""
-    lo = np.asarray(lo, dtype=np.float64).reshape(3)
-    hi = np.asarray(hi, dtype=np.float64).reshape(3)
-    centre = 0.5 * (lo + hi)
-    K = ctx.options.max_reflections
-    if len(ctx.tx) != 1:
-        raise WavepathsError("launched candidates take one transmitter per context")
-    far = 2.0 * scene.diagonal
-    eps = 1e-6 * scene.diagonal
-    grow = options.radius_factor * np.sqrt(4.0 * np.pi / rays)
-    parts: list[tuple] = []
-    directions = fibonacci_directions(rays)
-    for s0 in range(0, rays, options.fan_rays):
-        u = directions[s0:s0 + options.fan_rays]
-        origin = np.repeat(ctx.tx, len(u), axis=0)
-        travelled = np.zeros(len(u))
-        chain = np.zeros((len(u), 0), np.int64)
-        for k in range(K + 1):
-            if k == 0:
-                poly, dist = first_hits(scene, origin, u, far, eps)
-            else:
-                poly, dist = first_hits_past(scene, origin, u, far, eps, chain[:, -1:])
-            if k >= 1:
-                end = origin + dist[:, None] * u
-                r0, r1 = grow * travelled, grow * (travelled + dist)
-                keep = np.nonzero(_reaches_box(origin, end, r0, r1, lo, hi))[0]
-                row = chain_rows(ctx.levels[k].polygons, chain[keep]) if len(keep) else np.zeros(0, np.int64)
-                keep, row = keep[row >= 0], row[row >= 0]
-                parts.append((origin[keep] - centre, end[keep] - centre, r0[keep], r1[keep],
-                              np.full(len(keep), k, np.int64), row))
-            hit = poly >= 0
-            if k == K or not hit.any():
-                break
-            sel, mirror, origin, u, travelled = reflect_and_branch(scene, origin, u, poly, dist, travelled,
-                                                                   0.0, grow, options.radius_factor)
-            chain = np.column_stack([chain[sel], mirror])
-    if parts:
-        cols = [np.concatenate(c) for c in zip(*parts)]
-    else:
-        cols = [np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
-                np.zeros(0, np.int64)]
-    f32 = np.float32
-    return RaySegments(centre, lo, hi, cols[0].astype(f32), cols[1].astype(f32), cols[2].astype(f32),
-                       cols[3].astype(f32), cols[4], cols[5])
-
-
-def reflection_candidates_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray, rays: int,
-                                   options: LaunchOptions = LaunchOptions(),
-                                   segments: RaySegments | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per reflection order ``k`` (index ``k - 1``), the (point, chain row of ``ctx.levels[k]``)
-    pairs that launched transmitter rays carry to ``points``: each segment of
-    :func:`ray_segments` (traced for the points' own box when ``segments`` is not given)
-    gives its mirror chain to the points within its tube."""
-    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    K = ctx.options.max_reflections
-    out = [(np.zeros(0, np.int64), np.zeros(0, np.int64)) for _ in range(K)]
-    if K == 0 or len(points) == 0:
-        return out
-    if segments is None:
-        segments = ray_segments(scene, ctx, rays, points.min(axis=0), points.max(axis=0), options)
-    elif not segments.covers(points):
-        raise WavepathsError("the ray segments were kept for a box that does not hold every query point")
-    from . import kernels
-
-    local = points - segments.centre
-    grid = PointGrid(local) if kernels.available() else None
-    seg, pt = tube_pairs(segments.start, segments.end, segments.r0, segments.r1, local, grid)
-    for k in range(1, K + 1):
-        sel = segments.order[seg] == k
-        if sel.any():
-            rows = unique_rows(np.column_stack([pt[sel], segments.chain[seg[sel]]]))
-            out[k - 1] = (rows[:, 0], rows[:, 1])
-    return out

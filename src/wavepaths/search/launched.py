@@ -32,7 +32,8 @@ from .diffraction import _diffraction_candidates, _diffraction_prefilter
 from .end_sides import _EndSide, _edge_frame, _sector_in_table, _transmitter_side
 from .geometry import mirror_points
 from .images import ImageLevel
-from .launch import EdgeSamples, LaunchOptions, candidate_sequences, edge_samples, fan_segments, ray_segments
+from .launch import EdgeSamples, LaunchOptions, candidate_sequences, edge_samples, fan_segments
+from .txrays import ray_segments
 from .paths import PathBatch
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -67,9 +68,9 @@ def prepare_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray) -> No
     With ``diffraction_candidates="launched"``: the Keller fans
     (:func:`~wavepaths.search.launch.fan_segments`, key ``("launch_fans", launch_fan)``);
     with ``reflection_candidates="launched"``: the transmitter's rays
-    (:func:`~wavepaths.search.launch.ray_segments`, key ``("launch_rays", launch_rays)``).
+    (:func:`~wavepaths.search.txrays.ray_segments`, key ``("launch_rays", launch_rays)``).
     The segments kept are those whose tubes reach the box of ``points``; a tile outside
-    that box traces its own. Does nothing in the exhaustive modes.
+    that box traces its own (:func:`cached_segments`). Does nothing in the exhaustive modes.
     """
     opts = ctx.options
     if len(points) == 0:
@@ -86,6 +87,13 @@ def prepare_launched(scene: "Scene", ctx: "TxContext", points: np.ndarray) -> No
         got = ctx.derived.get(key)
         if got is None or not got.covers(points):
             ctx.derived[key] = ray_segments(scene, ctx, opts.launch_rays, lo, hi, launch_options(ctx))
+
+
+def cached_segments(ctx: "TxContext", key: tuple, points: np.ndarray):
+    """The segments :func:`prepare_launched` kept under ``key`` if their box holds every one
+    of ``points``, else ``None`` (the caller traces the points' own)."""
+    got = ctx.derived.get(key)
+    return got if got is not None and got.covers(points) else None
 
 
 def receiver_images(scene: "Scene", rx: np.ndarray, point: np.ndarray, after: np.ndarray) -> ImageLevel:
@@ -126,9 +134,7 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
     """
     opts = ctx.options
     samples = context_samples(scene, ctx)
-    segments = ctx.derived.get(("launch_fans", opts.launch_fan))
-    if segments is not None and not segments.covers(rx):
-        segments = None  # traced for other points: this tile's own box instead
+    segments = cached_segments(ctx, ("launch_fans", opts.launch_fan), rx)
     seq = candidate_sequences(scene, ctx, rx, launch_options(ctx), samples, segments)
     stats["launched_candidates"] += len(seq)
     out: list[PathBatch] = []

@@ -173,11 +173,10 @@ def trace_tile(scene: "Scene", ctx: TxContext, rx: np.ndarray, rx_offset: int = 
         batches.append(los_tile(scene, ctx, rx, rx_offset, stats, grazing))
     launched = None
     if opts.reflection_candidates == "launched" and opts.max_reflections >= 1:
-        from .launch import reflection_candidates_launched
+        from .launched import cached_segments
+        from .txrays import reflection_candidates_launched
 
-        segments = ctx.derived.get(("launch_rays", opts.launch_rays))
-        if segments is not None and not segments.covers(rx):
-            segments = None  # traced for other points: this tile's own box instead
+        segments = cached_segments(ctx, ("launch_rays", opts.launch_rays), rx)
         launched = reflection_candidates_launched(scene, ctx, rx, opts.launch_rays, segments=segments)
         stats["launched_reflection_candidates"] += sum(len(p) for p, _ in launched)
     for k in range(1, opts.max_reflections + 1):

@@ -3,6 +3,8 @@ within each segment's tube, each pair once, through a bucket grid of the points.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 
@@ -118,3 +120,72 @@ def unique_rows(rows: np.ndarray, return_inverse: bool = False):
         u, inv = np.unique(rec, return_inverse=True)
         return u.view(rows.dtype).reshape(-1, rows.shape[1]), inv.ravel().astype(np.int64)
     return np.unique(rec).view(rows.dtype).reshape(-1, rows.shape[1])
+
+
+def reaches_box(origin: np.ndarray, end: np.ndarray, r0: np.ndarray, r1: np.ndarray, lo: np.ndarray,
+                 hi: np.ndarray) -> np.ndarray:
+    """(k,) bool: the tube of segment ``origin -> end``, radius ``r0`` to ``r1`` (linear in the
+    segment's parameter ``u``), may reach the box ``[lo, hi]``: some ``u`` in [0, 1] has every
+    coordinate within the radius of the box, ``lo - r(u) <= x(u) <= hi + r(u)`` (conservative:
+    the box grown by a cube of the radius, not a sphere). Each of the six conditions is linear
+    in ``u``, so the ``u`` that pass form one interval (a ray rising from a roof, whose tube
+    widens slower than it climbs, never comes down to the receivers)."""
+    d = end - origin
+    dr = r1 - r0
+    u0 = np.zeros(len(origin))
+    u1 = np.ones(len(origin))
+    for ax in range(3):
+        # x + r >= lo  and  x - r <= hi, i.e. a u <= b for (a, b) below
+        for a, b in ((-(d[:, ax] + dr), origin[:, ax] + r0 - lo[ax]), (d[:, ax] - dr, hi[ax] + r0 - origin[:, ax])):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                bound = b / a
+            u1 = np.where(a > 0, np.minimum(u1, bound), u1)
+            u0 = np.where(a < 0, np.maximum(u0, bound), u0)
+            u1 = np.where((a == 0) & (b < 0), -1.0, u1)
+    return u0 <= u1
+
+
+def in_box(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Whether every one of ``points`` (p, 3) lies in the box ``[lo, hi]``."""
+    return bool(len(points) == 0 or (np.all(points.min(axis=0) >= lo) and np.all(points.max(axis=0) <= hi)))
+
+
+@dataclass(frozen=True)
+class BoxSegments:
+    """Segments of launched rays kept for a box of query points, with their tubes; the
+    shared part of :class:`~wavepaths.search.launch.FanSegments` and
+    :class:`~wavepaths.search.txrays.RaySegments` (struct of arrays over ``n`` segments).
+
+    The coordinates are float32 offsets from ``centre``: recentred, float32 keeps about
+    0.1 mm within a few kilometres of it, and the tubes are tens of centimetres wide at least.
+
+    Attributes
+    ----------
+    centre : (3,) float64
+        Origin of the float32 coordinates [m].
+    lo, hi : (3,) float64
+        The box the segments were kept for [m].
+    start, end : (n, 3) float32
+        Ends of each segment [m from ``centre``].
+    r0, r1 : (n,) float32
+        Tube radius at each end [m] (for a Keller fan, the semi-axis across the cone).
+    """
+
+    centre: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    r0: np.ndarray
+    r1: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(getattr(self, f).nbytes for f in self.__dataclass_fields__))
+
+    def covers(self, points: np.ndarray) -> bool:
+        """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
+        return in_box(points, self.lo, self.hi)
