@@ -331,3 +331,29 @@ def test_fans_traced_once_for_a_box_give_each_subset_its_own_candidates(canyon):
     assert own.keys() == cached.keys() and len(own) > 100
     with pytest.raises(WavepathsError, match="box"):
         candidate_sequences(scene, ctx, pts.max(axis=0)[None] + 1.0, LaunchOptions(), samples, segs)
+
+
+def test_the_shipped_context_holds_only_the_named_sources_and_finds_the_same_paths(canyon):
+    """What a launched map sends its workers (:func:`shipped_context`): the diffraction
+    sources cut to those the cached fans name, the segments renumbered, no edge samples;
+    its tiles find exactly the paths of the full context."""
+    import dataclasses
+
+    from wavepaths.search.launched import prepare_launched, shipped_context
+
+    scene, ctx, pts, _ = canyon
+    full = dataclasses.replace(ctx, options=ctx.options.with_(diffraction_candidates="launched"), derived={})
+    prepare_launched(scene, full, pts)
+    ship = shipped_context(full)
+    n_full = sum(len(s.dihedron) for s in full.diffraction_sources)
+    n_ship = sum(len(s.dihedron) for s in ship.diffraction_sources)
+    assert 0 < n_ship < n_full
+    assert not any(isinstance(k, tuple) and k[0] == "launch_samples" for k in ship.derived)
+    got = {}
+    for c in (full, ship):
+        batches, _ = trace_tile(scene, c, pts)
+        got[id(c)] = {(int(b.rx_index[i]), tuple(b.primitive[i].tolist())): b.vertices[i]
+                      for b in batches for i in range(len(b.rx_index))}
+    a, b = got[id(full)], got[id(ship)]
+    assert len(a) > 1000 and a.keys() == b.keys()
+    assert all(np.allclose(a[k], b[k], atol=1e-12) for k in a)

@@ -39,7 +39,7 @@ from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble
 from ..search.diffraction import finish_diffraction
-from ..search.launched import prepare_launched
+from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
 from ..search.trace import check_positions
 from .grid import Grid, MeshGrid, PlanarGrid
@@ -399,6 +399,8 @@ def coverage(
         t = time.perf_counter()
         prepare_launched(scene, ctx, flat[active])
         timings["launch_s"] = time.perf_counter() - t
+    # what the tiles receive: with launched fans, only the sources they name
+    tile_ctx = shipped_context(ctx) if launched else ctx
 
     a_total = np.full((m, n), np.nan + 0j)
     a_sum = np.full((3, m, n), np.nan + 0j)
@@ -424,7 +426,8 @@ def coverage(
 
     t = time.perf_counter()
     try:
-        workers = run_tiles(scene, ctx, cfg, [flat[c] for c in tiles], on_done, workers=cov.workers, client=client)
+        workers = run_tiles(scene, tile_ctx, cfg, [flat[c] for c in tiles], on_done, workers=cov.workers,
+                            client=client)
     finally:
         if bar is not None:
             bar.close()
