@@ -190,7 +190,8 @@ def test_trace_options_check_the_launched_fields():
         TraceOptions(reflection_candidates="rays")
     with pytest.raises(WavepathsError, match="launch_rays"):
         TraceOptions(launch_rays=1)
-    assert TraceOptions().diffraction_candidates == "exhaustive"
+    assert TraceOptions().diffraction_candidates == "exhaustive" and not TraceOptions().launched
+    assert TraceOptions(reflection_candidates="launched").launched and TraceOptions(diffraction_candidates="launched").launched
 
 
 def test_launched_reflections_find_the_exhaustive_chains(canyon):

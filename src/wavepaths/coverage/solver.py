@@ -149,7 +149,7 @@ def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> in
     :data:`TILE_IMAGE_BUDGET` images: ``clamp(budget / images per receiver, 16, 1024)``.
     With several workers, tiles are also small enough to give each worker two.
     """
-    if ctx.options.diffraction_candidates == "launched" or ctx.options.reflection_candidates == "launched":
+    if ctx.options.launched:
         # launched candidates: no receiver image trees, and every tile scans all the rays
         # traced for the map, so the tiles are as large as the workers allow
         w = 1 if workers == 1 else (workers or default_workers())
@@ -393,14 +393,13 @@ def coverage(
     t = time.perf_counter()
     ctx = build_tx_context(scene, tx, opts)
     timings["context_s"] = time.perf_counter() - t
-    launched = opts.diffraction_candidates == "launched" or opts.reflection_candidates == "launched"
-    if launched:
+    if opts.launched:
         # the Keller fans traced once here for every cell, then shipped with the context
         t = time.perf_counter()
         prepare_launched(scene, ctx, flat[active])
         timings["launch_s"] = time.perf_counter() - t
     # what the tiles receive: with launched fans, only the sources they name
-    tile_ctx = shipped_context(ctx) if launched else ctx
+    tile_ctx = shipped_context(ctx) if opts.launched else ctx
 
     a_total = np.full((m, n), np.nan + 0j)
     a_sum = np.full((3, m, n), np.nan + 0j)
@@ -409,7 +408,7 @@ def coverage(
     stats: Counter = Counter(ctx.stats)
     size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers)
     timings["tile_size"] = size
-    if launched and isinstance(grid, PlanarGrid):
+    if opts.launched and isinstance(grid, PlanarGrid):
         tiles = block_tiles(grid.shape, active, size)
     else:
         tiles = [active[s : s + size] for s in range(0, len(active), size)]

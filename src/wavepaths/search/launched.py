@@ -22,6 +22,7 @@ what it finds, it finds exactly.
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
 from typing import TYPE_CHECKING
 
@@ -96,8 +97,6 @@ def shipped_context(ctx: "TxContext") -> "TxContext":
     query the segments). Each worker process receives its own copy of the context: on
     munich the sources are some 480 MB of it, of which the segments name a few per cent.
     Returns ``ctx`` itself when no fans were traced."""
-    import dataclasses
-
     key = ("launch_fans", ctx.options.launch_fan)
     segs = ctx.derived.get(key)
     if segs is None:

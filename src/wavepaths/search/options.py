@@ -190,6 +190,12 @@ class TraceOptions:
         return replace(self, **changes)
 
     @property
+    def launched(self) -> bool:
+        """Whether any candidates come from launched rays (``diffraction_candidates`` or
+        ``reflection_candidates`` is ``"launched"``)."""
+        return self.diffraction_candidates == "launched" or self.reflection_candidates == "launched"
+
+    @property
     def max_depth(self) -> int:
         """The largest number of interactions any path may have."""
         d = self.max_reflections

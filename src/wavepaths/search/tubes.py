@@ -182,10 +182,6 @@ class BoxSegments:
     def __len__(self) -> int:
         return len(self.start)
 
-    @property
-    def nbytes(self) -> int:
-        return int(sum(getattr(self, f).nbytes for f in self.__dataclass_fields__))
-
     def covers(self, points: np.ndarray) -> bool:
         """Whether every one of ``points`` (p, 3) lies in the box the segments were kept for."""
         return in_box(points, self.lo, self.hi)
