@@ -52,6 +52,30 @@ def test_compiled_and_numpy_embree_casters_decide_every_segment_alike(moved, rng
     assert got.exact_fallbacks == ref.exact_fallbacks
 
 
+@needs_numba
+@pytest.mark.parametrize("moved", [False, True], ids=["origin", "at_1e6_m_rotated"])
+def test_a_free_start_decides_like_the_two_half_rays_with_fewer_rays(moved, rng):
+    """``free_start=True`` (one ray from the free end first): the verdicts of the float64
+    numpy caster on every segment, with the hint right (ends in the open) and wrong (ends on
+    faces and at vertices); where it is right, a clear segment costs one ray, not two."""
+    from wavepaths.raycast.numpy_caster import NumpyRayCaster
+
+    scene = _street_canyon(moved)
+    a, b = _segments(scene, rng, 4000)
+    exact = NumpyRayCaster(scene)
+    for x, y in ((a, b), (b, a)):
+        expect = exact.occluded(x, y)
+        caster = EmbreeRayCaster(scene)
+        np.testing.assert_array_equal(caster.occluded(x, y, free_start=True), expect)
+    free_a, free_b = a[:4000], b[:4000]  # the free segments: both ends in the open
+    clear = ~exact.occluded(free_a, free_b)
+    halves, one = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
+    halves.occluded(free_a[clear], free_b[clear])
+    one.occluded(free_a[clear], free_b[clear], free_start=True)
+    assert clear.sum() > 1000
+    assert one.rays_cast <= clear.sum() < halves.rays_cast  # one ray or none (outside the box) each
+
+
 def test_without_numba_the_default_caster_runs_the_numpy_reference(monkeypatch, rng):
     """``compiled=True`` is a clear error; the default falls back to numpy, same verdicts."""
     scene = load_scene("street_canyon")

@@ -17,8 +17,14 @@ CANDIDATE_BUDGET = 1 << 21  # candidates held at once (bounds temporaries to ~10
 
 
 def leg_order(legs: int) -> list[int]:
-    """Legs of a chain in casting order: the last (to the receiver), the first, then the others."""
-    return list(dict.fromkeys([legs - 1, 0, *range(1, legs - 1)]))
+    """Legs of a chain in casting order: from the receiver back to the transmitter.
+
+    The legs nearest the receiver are the most often blocked (street-canyon R2+D2 map: 40 %,
+    34 %, 16 % and 15 % of four-leg chains, from the last leg to the first), so the chains
+    still clear after them, the only ones cast again, are the fewest: 2.39 casts per four-leg
+    chain and 2.00 per three-leg chain, against 2.55 and 2.10 in the order last, first, inner.
+    """
+    return list(range(legs - 1, -1, -1))
 
 
 def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact: np.ndarray | None = None) -> np.ndarray:
@@ -43,14 +49,20 @@ def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact:
         degenerate |= (seg[:, [0, -1]] <= plane_tolerance(scene)).any(axis=1)
     # the true vertices: by the casters' rule (wavepaths.raycast) an end on a surface does not
     # hit it, and a face next to it still blocks (no lifted or shortened copies)
-    # one leg at a time, each cast only for the chains still clear (compaction): the leg to
-    # the receiver first (most often blocked), then from the transmitter, then the inner ones
+    # one leg at a time, each cast only for the chains still clear (compaction), from the
+    # receiver back (leg_order)
     blocked = np.zeros((k, s - 1), dtype=bool)
     alive = np.nonzero(~degenerate)[0]
     for j in leg_order(s - 1):
         if len(alive) == 0:
             break
-        hit = scene.raycaster.occluded(vertices[alive, j], vertices[alive, j + 1])
+        if s > 2 and j in (0, s - 2):
+            # a leg from the transmitter or to the receiver: cast from that end, which lies in
+            # the open (a hint; an end on a face costs two half-rays, never a wrong answer)
+            out, other = (0, 1) if j == 0 else (s - 1, s - 2)
+            hit = scene.raycaster.occluded(vertices[alive, out], vertices[alive, other], free_start=True)
+        else:
+            hit = scene.raycaster.occluded(vertices[alive, j], vertices[alive, j + 1])
         stats["rays_cast"] += len(alive)
         blocked[alive[hit], j] = True
         alive = alive[~hit]
