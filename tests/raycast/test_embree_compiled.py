@@ -76,6 +76,43 @@ def test_a_free_start_decides_like_the_two_half_rays_with_fewer_rays(moved, rng)
     assert one.rays_cast <= clear.sum() < halves.rays_cast  # one ray or none (outside the box) each
 
 
+@needs_numba
+@pytest.mark.parametrize("free_start", [False, True])
+def test_legs_read_from_the_chains_decide_like_the_gathered_segments(free_start, rng):
+    """``occluded_legs(V, alive, i, j)`` (the rays made from the chains' array) answers what
+    ``occluded(V[alive, i], V[alive, j])`` answers, leg by leg, with the same ray count; and
+    the degenerate-chain kernel of ``occluded_chains`` flags what its numpy form flags."""
+    from wavepaths.search import _numba as search_numba
+
+    scene = load_scene("street_canyon")
+    a, b = _segments(scene, rng, 1500)
+    n = len(a) // 3 * 3
+    V = np.stack([a[:n], b[:n], a[::-1][:n]], axis=1).reshape(-1, 3, 3)  # chains of three points, two legs
+    alive = np.sort(rng.choice(len(V), len(V) // 2, replace=False))
+    for i, j in ((0, 1), (2, 1), (1, 2)):
+        gathered, legs = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
+        expect = gathered.occluded(V[alive, i], V[alive, j], free_start=free_start)
+        np.testing.assert_array_equal(legs.occluded_legs(V, alive, i, j, free_start=free_start), expect)
+        assert legs.rays_cast == gathered.rays_cast
+        assert 0.05 < expect.mean() < 0.95
+    W = V.copy()
+    W[::7, 1] = W[::7, 0] + 1e-13  # a first segment within rounding
+    W[1::7, 2] = W[1::7, 1]  # a last segment of length 0
+    for s in (2, 3, 4):
+        X = np.concatenate([W, W[:, :1]], axis=1)[:, :s] if s == 4 else W[:, :s]
+        if s == 4:
+            X[2::7, 2] = X[2::7, 1] + 1e-9  # an inner segment below the weld tolerance
+        d = np.diff(X, axis=1)
+        seg = np.sqrt(np.einsum("ksj,ksj->ks", d, d))
+        weld, plane = 1e-7, 1e-10
+        ref = (seg[:, 1:-1] <= weld).any(axis=1) if s > 3 else np.zeros(len(X), bool)
+        if s > 2:
+            ref |= (seg[:, [0, -1]] <= plane).any(axis=1)
+        got = search_numba.degenerate_chains(np.ascontiguousarray(X), weld, plane)
+        np.testing.assert_array_equal(got, ref)
+        assert got.any() == (s > 2)
+
+
 def test_without_numba_the_default_caster_runs_the_numpy_reference(monkeypatch, rng):
     """``compiled=True`` is a clear error; the default falls back to numpy, same verdicts."""
     scene = load_scene("street_canyon")

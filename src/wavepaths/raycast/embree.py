@@ -197,6 +197,26 @@ class EmbreeRayCaster:
             blocked[rest] = self._exact.blocked(a[rest], b[rest])
         return blocked
 
+    def occluded_legs(self, V: np.ndarray, alive: np.ndarray, i: int, j: int, free_start: bool = False) -> np.ndarray:
+        """:meth:`occluded` of the legs ``V[alive, i] -> V[alive, j]`` of chains ``V`` (k, s, 3).
+
+        The same answers as ``occluded(V[alive, i], V[alive, j], free_start)``; with the
+        compiled kernels on one thread, the legs are read from ``V`` where the rays are made
+        (:func:`wavepaths.raycast._numba.leg_rays`), without the two gathered copies.
+        """
+        if self._kernels is None or self._threads(len(alive)) > 1:
+            return self.occluded(V[alive, i], V[alive, j], free_start=free_start)
+        K = self._kernels
+        V = np.ascontiguousarray(V, dtype=np.float64)
+        alive = np.ascontiguousarray(alive, dtype=np.int64)
+        if len(alive) == 0:
+            return np.zeros(0, dtype=bool)
+        if free_start:
+            A, B, rows, start, unit, span = K.leg_rays(V, alive, i, j, self._center, self._lo, self._hi)
+            return self._free_core(A, B, rows, start, unit, span,
+                                   lambda rest: self._occluded_compiled(V[alive[rest], i], V[alive[rest], j]))
+        return self._halves_core(*K.leg_canonical_recentred(V, alive, i, j, self._center))
+
     def _occluded_free_compiled(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """:meth:`occluded` of segments whose ``a`` ends lie in the open (``free_start``).
 
@@ -213,21 +233,30 @@ class EmbreeRayCaster:
           order).
 
         A clear segment costs one ray instead of two. On the street-canyon R2+D1 map the legs
-        from the transmitter and to the receivers are about half of the segments cast.
+        from the transmitter and to the receivers are three quarters of the segments cast.
         """
-        K, ex = self._kernels, self._exact
         c = np.ascontiguousarray
         A, B = c(a - self._center), c(b - self._center)
-        k = len(A)
-        rows, start, unit, span = K.segment_rays(A, B, self._lo, self._hi)
-        prim = np.full(len(rows), -1, dtype=np.int32)
-        for s in range(0, len(rows), self._batch):
+        rows, start, unit, span = self._kernels.segment_rays(A, B, self._lo, self._hi)
+        return self._free_core(A, B, rows, start, unit, span, lambda rest: self._occluded_compiled(a[rest], b[rest]))
+
+    def _embree_first(self, start: np.ndarray, unit: np.ndarray, span: np.ndarray) -> np.ndarray:
+        """(n,) int32: the nearest triangle on each float32 ray (-1: none), in batches; counted."""
+        prim = np.full(len(start), -1, dtype=np.int32)
+        for s in range(0, len(start), self._batch):
             prim[s : s + self._batch] = self._scene.run(
                 start[s : s + self._batch], unit[s : s + self._batch], dists=span[s : s + self._batch],
                 query="INTERSECT")
         with _COUNT_LOCK:
-            self._rays += len(rows)
-        blocked = np.zeros(k, dtype=bool)
+            self._rays += len(start)
+        return prim
+
+    def _free_core(self, A, B, rows, start, unit, span, undecided) -> np.ndarray:
+        """:meth:`_occluded_free_compiled` from the recentred ends and their rays; ``undecided(rest)``
+        decides the segments ``rest`` the single ray leaves open."""
+        K, ex = self._kernels, self._exact
+        prim = self._embree_first(start, unit, span)
+        blocked = np.zeros(len(A), dtype=bool)
         hit = prim >= 0
         seg, p = rows[hit], prim[hit].astype(np.int64)
         verdict = K.confirm_hits(A, B, seg, p, False, ex.normal, ex.offset, ex.tol, ex.inward, ex.inward_offset,
@@ -235,13 +264,18 @@ class EmbreeRayCaster:
         blocked[seg[verdict == 1]] = True
         rest = seg[verdict >= 2]
         if len(rest):
-            blocked[rest] = self._occluded_compiled(a[rest], b[rest])
+            blocked[rest] = undecided(rest)
         return blocked
 
     def _occluded_compiled(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """:meth:`occluded` with the set-up and the float64 confirmation compiled (same steps)."""
+        return self._halves_core(*self._kernels.canonical_recentred(np.ascontiguousarray(a), np.ascontiguousarray(b),
+                                                                     self._center))
+
+    def _halves_core(self, A: np.ndarray, B: np.ndarray, live: np.ndarray) -> np.ndarray:
+        """:meth:`_occluded_compiled` from the canonical, recentred ends ``A``, ``B`` and ``live``
+        (the segments with length)."""
         K, ex = self._kernels, self._exact
-        A, B, live = K.canonical_recentred(np.ascontiguousarray(a), np.ascontiguousarray(b), self._center)
         k = len(A)
         blocked = np.zeros(k, dtype=bool)
         uncertain = np.zeros(k, dtype=bool)
@@ -251,13 +285,7 @@ class EmbreeRayCaster:
             if len(sel) == 0:
                 break
             rows, start, unit, span = K.half_rays(A, B, sel, second, self._lo, self._hi)
-            prim = np.full(len(rows), -1, dtype=np.int32)
-            for s in range(0, len(rows), self._batch):
-                prim[s : s + self._batch] = self._scene.run(
-                    start[s : s + self._batch], unit[s : s + self._batch], dists=span[s : s + self._batch],
-                    query="INTERSECT")
-            with _COUNT_LOCK:
-                self._rays += len(rows)
+            prim = self._embree_first(start, unit, span)
             hit = prim >= 0
             seg, p = sel[rows[hit]], prim[hit].astype(np.int64)
             verdict = K.confirm_hits(A, B, seg, p, second, ex.normal, ex.offset, ex.tol, ex.inward,

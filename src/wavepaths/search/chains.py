@@ -35,34 +35,44 @@ def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact:
     counts as blocked: its geometry is undefined.
     """
     k, s, _ = vertices.shape
-    d = np.diff(vertices, axis=1)
-    seg = np.sqrt(np.einsum("ksj,ksj->ks", d, d))
-    # only segments joining two interactions can be degenerate; a transmitter or receiver may
-    # sit as close to a surface as it likes
-    inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))
-    degenerate = (inner <= scene.length_tolerance(scene.tolerances.weld)).any(axis=1)
-    if s > 2:
-        # ... but one exactly on the face or edge it would interact with (within the casters'
-        # plane tolerance, i.e. rounding) takes part in no interaction there (docs/search.md)
-        from ..raycast import plane_tolerance
+    from ..raycast import plane_tolerance
+    from . import kernels
 
-        degenerate |= (seg[:, [0, -1]] <= plane_tolerance(scene)).any(axis=1)
+    # only segments joining two interactions can be degenerate; a transmitter or receiver may
+    # sit as close to a surface as it likes, but one exactly on the face or edge it would
+    # interact with (within the casters' plane tolerance, i.e. rounding) takes part in no
+    # interaction there (docs/search.md)
+    weld, plane = scene.length_tolerance(scene.tolerances.weld), plane_tolerance(scene)
+    if kernels.available():
+        from . import _numba
+
+        degenerate = _numba.degenerate_chains(np.ascontiguousarray(vertices, dtype=np.float64), weld, plane)
+    else:
+        d = np.diff(vertices, axis=1)
+        seg = np.sqrt(np.einsum("ksj,ksj->ks", d, d))
+        inner = seg[:, 1:-1] if s > 3 else np.zeros((k, 0))
+        degenerate = (inner <= weld).any(axis=1)
+        if s > 2:
+            degenerate |= (seg[:, [0, -1]] <= plane).any(axis=1)
     # the true vertices: by the casters' rule (wavepaths.raycast) an end on a surface does not
     # hit it, and a face next to it still blocks (no lifted or shortened copies)
     # one leg at a time, each cast only for the chains still clear (compaction), from the
     # receiver back (leg_order)
     blocked = np.zeros((k, s - 1), dtype=bool)
     alive = np.nonzero(~degenerate)[0]
+    caster = scene.raycaster
+    legs = getattr(caster, "occluded_legs", None)
     for j in leg_order(s - 1):
         if len(alive) == 0:
             break
-        if s > 2 and j in (0, s - 2):
-            # a leg from the transmitter or to the receiver: cast from that end, which lies in
-            # the open (a hint; an end on a face costs two half-rays, never a wrong answer)
-            out, other = (0, 1) if j == 0 else (s - 1, s - 2)
-            hit = scene.raycaster.occluded(vertices[alive, out], vertices[alive, other], free_start=True)
+        # a leg from the transmitter or to the receiver is cast from that end, which lies in
+        # the open (a hint; an end on a face costs two half-rays, never a wrong answer)
+        free = s > 2 and j in (0, s - 2)
+        i0, i1 = ((0, 1) if j == 0 else (s - 1, s - 2)) if free else (j, j + 1)
+        if legs is not None:
+            hit = legs(vertices, alive, i0, i1, free_start=free)
         else:
-            hit = scene.raycaster.occluded(vertices[alive, j], vertices[alive, j + 1])
+            hit = caster.occluded(vertices[alive, i0], vertices[alive, i1], free_start=free)
         stats["rays_cast"] += len(alive)
         blocked[alive[hit], j] = True
         alive = alive[~hit]
