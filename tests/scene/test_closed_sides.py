@@ -107,3 +107,28 @@ def test_points_inside_closed_objects():
     screen = build_scene(np.array(SCREEN + SCREEN[::-1], float), np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]),
                          np.zeros(4, int), np.zeros(4, int), ["s"], [PEC])
     assert not points_inside_closed(screen, [[0.0, 0.0, 1.0], [0.0, 1e-9, 1.0], [0.0, -1.0, 1.0]]).any()
+
+
+@pytest.mark.parametrize("name", ["street_canyon", "three_face_edge", "touching_blocks"])
+def test_the_box_prefilter_of_points_inside_closed_changes_no_answer(name, rng, monkeypatch):
+    """Points outside every closed object's (padded) box skip the parity test: the answers
+    on points in and around the scene, on its vertices and on its faces are those of the
+    parity test run on every point (boxes made infinite), also in chunks of a few pairs."""
+    from wavepaths.scene import closed
+
+    s = load_scene(name)
+    lo, hi = s.bounds
+    tri = s.vertices[s.triangles[rng.integers(0, len(s.triangles), 400)]]
+    pts = np.concatenate([rng.uniform(lo - 2, hi + 2, (3000, 3)), s.vertices,
+                          np.einsum("kij,ki->kj", tri, rng.dirichlet(np.ones(3), 400))])
+    got = points_inside_closed(s, pts)
+    s.__dict__.pop("_closed_cache", None)
+    n = len(s.object_names)
+    monkeypatch.setattr(closed, "_object_boxes", lambda scene: (np.full((n, 3), -np.inf), np.full((n, 3), np.inf)))
+    ref = points_inside_closed(s, pts)
+    np.testing.assert_array_equal(got, ref)
+    assert ref.any() and not ref.all()
+    monkeypatch.undo()
+    monkeypatch.setattr(closed, "BOX_PAIRS", 7)
+    s.__dict__.pop("_closed_cache", None)
+    np.testing.assert_array_equal(points_inside_closed(s, pts), ref)

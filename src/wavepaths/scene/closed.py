@@ -178,11 +178,19 @@ def hidden_polygons(scene: "Scene") -> np.ndarray:
     return ~scene.polygon_sides.any(axis=1)
 
 
+BOX_PAIRS = 1 << 20
+"""(point, object) box tests held at once by :func:`points_inside_closed`."""
+
+
 def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
     """(k, objects) bool: whether each point lies inside each closed object with a volume.
 
     The ray-parity rule of :mod:`wavepaths.coverage.inside` (three rays, majority, float64)
-    applied to each such object alone. Meant for a handful of points (transmitters).
+    applied to each such object alone, to the points within an object's bounding box
+    (padded by the plane tolerance): a point outside every box lies inside none (the region
+    a closed surface bounds is within its box; a point on the surface, where either answer
+    may come, is within the padding). The receivers of a street-canyon coverage tile
+    (1,024 cells at street level) then skip the parity test, which took 4 % of the map.
     """
     from ..coverage.inside import SolidObjects, inside_solids
 
@@ -191,6 +199,16 @@ def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
     out = np.zeros((len(points), len(scene.object_names)), dtype=bool)
     if len(solid) == 0 or len(points) == 0:
         return out
+    lo, hi = _object_boxes(scene)
+    pad = scene.length_tolerance(scene.tolerances.plane_distance)
+    lo, hi = lo[solid] - pad, hi[solid] + pad
+    near = np.zeros(len(points), dtype=bool)
+    step = max(1, BOX_PAIRS // len(solid))  # (point, object) pairs compared at once
+    for s in range(0, len(points), step):
+        p = points[s : s + step, None, :]
+        near[s : s + step] = ((p >= lo) & (p <= hi)).all(axis=2).any(axis=1)
+    if not near.any():
+        return out
     index = np.full(len(scene.object_names), -1, dtype=np.int64)
     index[solid] = np.arange(len(solid))
     tris = np.nonzero(index[scene.triangle_object] >= 0)[0]
@@ -198,5 +216,21 @@ def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
     groups[:] = [(int(o),) for o in solid]
     solids = SolidObjects(groups, np.ones(len(solid), bool), np.full(len(solid), -np.inf), tris,
                           index[scene.triangle_object[tris]])
-    out[:, solid] = inside_solids(scene, points, solids)
+    rows = np.nonzero(near)[0]
+    out[np.ix_(rows, solid)] = inside_solids(scene, points[rows], solids)
     return out
+
+
+def _object_boxes(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
+    """(objects, 3) float64 twice: each object's bounding box over its triangles' corners
+    (``+inf`` / ``-inf`` for an object without triangles); cached on the scene."""
+    cache = scene.__dict__.setdefault("_closed_cache", {})
+    if "boxes" not in cache:
+        n = len(scene.object_names)
+        corners = scene.vertices[scene.triangles]  # (t, 3, 3)
+        owner = np.repeat(scene.triangle_object, 3)
+        lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+        np.minimum.at(lo, owner, corners.reshape(-1, 3))
+        np.maximum.at(hi, owner, corners.reshape(-1, 3))
+        cache["boxes"] = (lo, hi)
+    return cache["boxes"]
