@@ -8,6 +8,7 @@ same diffraction points (to 1e-9 m) and the same on-edge verdicts, and that
 import json
 
 import numpy as np
+import pytest
 
 from wavepaths.bench.point_search import (
     closed_form,
@@ -107,6 +108,16 @@ def test_diffraction_cost_benchmark_reports_per_path_costs():
     off_paths = p["all_paths"] - p["diffracted_paths"]
     rebuilt = 1 + p["us_per_diffracted_path"] * p["diffracted_paths"] / (p["us_per_path_off"] * off_paths)
     assert abs(rebuilt - p["ratio"]) < 1e-9 * p["ratio"]
+    # the stages of the headline pair: disjoint, within the total; the diffraction stages
+    # are empty without diffraction and hold most of the time diffraction adds
+    st = {row["stage"]: row for row in r["stages"]}
+    parts = [k for k in st if k not in ("other", "total")]
+    for key in ("off_s", "on_s"):
+        assert all(st[k][key] >= 0 for k in st)
+        assert sum(st[k][key] for k in parts) + st["other"][key] == pytest.approx(st["total"][key], rel=1e-9)
+    diff = [k for k in parts if k.startswith("diffraction") or k.startswith("receivers'")]
+    assert len(diff) == 4 and all(st[k]["off_s"] == 0 for k in diff)
+    assert sum(st[k]["added_s"] for k in diff) > 0.4 * st["total"]["added_s"]
 
 
 def test_every_path_query_setting_of_the_tradeoff_sweep_is_accepted_by_trace():

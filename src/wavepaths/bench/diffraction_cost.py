@@ -21,7 +21,9 @@ medians is reported. One process (``workers=1``). Beside it, what a path costs: 
 without diffraction per path it finds (``us_per_path_off``), the time diffraction adds per
 diffracted path (``us_per_diffracted_path``), and how many more paths the map with
 diffraction holds (``paths_ratio``): the time ratio is about the paths ratio times the
-ratio of those per-path costs.
+ratio of those per-path costs. And where the headline pair's time goes (``stages``): both
+maps once more under cProfile, split into the stages of :data:`STAGES` (the profiler
+inflates Python calls: read the shares).
 """
 
 from __future__ import annotations
@@ -45,6 +47,48 @@ PAIRS = [
     ("R2", {"max_reflections": 2, "diffraction": False}, "R2+D1 tol 0.1 dB",
      {"max_reflections": 2, "diffraction": True, "diffraction_reflections": 1, "tolerance_db": 0.1}),
 ]
+
+
+# ---- where the time goes -----------------------------------------------------------------
+# (label, [(module path suffix, function) added], [(suffix, function) subtracted]): cumulative
+# times from cProfile; the stages are disjoint parts of coverage()
+STAGES = [
+    ("context (per transmitter)", [("search/context.py", "build_tx_context")], []),
+    ("line of sight and reflections", [("search/tile.py", "los_tile"), ("search/tile.py", "reflection_tile")], []),
+    ("receivers' image trees (diffraction after a reflection)", [("search/tile.py", "_diffraction_part")],
+     [("search/diffraction.py", "diffraction_tile")]),
+    ("diffraction: receiver side (receiver image x edge tests)", [("search/end_sides.py", "_receiver_side")], []),
+    ("diffraction: join, closed-form points, back-traces", [("search/diffraction.py", "diffraction_tile")],
+     [("search/end_sides.py", "_receiver_side"), ("search/diffraction.py", "finish_diffraction")]),
+    ("diffraction: occlusion of the legs", [("search/diffraction.py", "finish_diffraction")], []),
+    ("path assembly", [("search/paths.py", "assemble")], []),
+    ("fields (all paths)", [("coverage/solver.py", "_fields_sums")], []),
+]
+
+
+def stage_times(fn) -> dict:
+    """Seconds per stage of ``fn()`` (a coverage map) under cProfile: :data:`STAGES`, the
+    rest (``"other"``) and ``"total"``. Read the shares: the profiler inflates Python calls."""
+    import cProfile
+    import pstats
+
+    pr = cProfile.Profile()
+    pr.enable()
+    fn()
+    pr.disable()
+    cum: dict = {}
+    for (path, _, name), (_, _, _, ct, _) in pstats.Stats(pr).stats.items():
+        key = (path.replace("\\", "/"), name)
+        cum[key] = cum.get(key, 0.0) + ct
+
+    def total(pairs):
+        return sum(v for (path, name), v in cum.items() for suffix, want in pairs
+                   if name == want and path.endswith(suffix))
+
+    out = {label: max(total(plus) - total(minus), 0.0) for label, plus, minus in STAGES}
+    out["total"] = total([("coverage/solver.py", "coverage")])
+    out["other"] = max(out["total"] - sum(out[label] for label, _, _ in STAGES), 0.0)
+    return out
 
 
 def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) -> dict:
@@ -91,8 +135,14 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
                         "us_per_path_off": 1e6 * t_off / max(off_paths, 1),
                         "us_per_diffracted_path": 1e6 * (t_on - t_off) / max(diffracted, 1),
                         "paths_ratio": all_paths / max(off_paths, 1), "same_geometrical_optics_paths": same_go})
+    # where the headline pair's time goes: the same two maps under cProfile, stage by stage
+    off_st, on_st = stage_times(runner(PAIRS[0][1], "off")), stage_times(runner(PAIRS[0][3], "map"))
+    added = {k: on_st[k] - off_st[k] for k in on_st}
+    stages = [{"stage": k, "off_s": off_st[k], "on_s": on_st[k], "added_s": added[k],
+               "share_of_added": added[k] / added["total"] if added["total"] > 0 else None}
+              for k in [label for label, _, _ in STAGES] + ["other", "total"]]
     return {"scene": "simple_street_canyon", "grid_shape": list(grid.shape), "cell_size_m": cell,
-            "pairs": results, "diffraction_cost_ratio": results[0]["ratio"], "headline_pair": "R2 / R2+D1",
+            "pairs": results, "stages": stages, "diffraction_cost_ratio": results[0]["ratio"], "headline_pair": "R2 / R2+D1",
             # the seed's own case (one diffraction between two fixed points), beside the headline
             "seed_case_ratio": next((r["ratio"] for r in results if r["on"] == "R2+D0"), None),
             "seed_ratio": SEED_RATIO, "target_ratio_max": 3.0}

@@ -423,6 +423,12 @@ interleaved round by round, and reported as medians over the rounds.</p>
                             ["pair", "off [s]", "on [s]", "ratio", "diffracted paths (on)", "all paths (on)",
                              "paths on / off", "us per path (off)", "us per diffracted path (added)"]))
         parts.append(_img(summary["figures"].get("diffraction_cost")))
+        if dc.get("stages"):
+            parts.append(f"<p>Where the time of {dc['headline_pair']} goes: both maps once more under cProfile, "
+                         "by stage (the profiler inflates Python calls; read the shares).</p>")
+            parts.append(_table([[r["stage"], r["off_s"], r["on_s"], r["added_s"], r["share_of_added"]]
+                                 for r in dc["stages"]],
+                                ["stage", "off [s]", "on [s]", "added by diffraction [s]", "share of the added time"]))
 
     sk = res.get("skips")
     if sk:
