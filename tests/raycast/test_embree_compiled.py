@@ -53,32 +53,7 @@ def test_compiled_and_numpy_embree_casters_decide_every_segment_alike(moved, rng
 
 
 @needs_numba
-@pytest.mark.parametrize("moved", [False, True], ids=["origin", "at_1e6_m_rotated"])
-def test_a_free_start_decides_like_the_two_half_rays_with_fewer_rays(moved, rng):
-    """``free_start=True`` (one ray from the free end first): the verdicts of the float64
-    numpy caster on every segment, with the hint right (ends in the open) and wrong (ends on
-    faces and at vertices); where it is right, a clear segment costs one ray, not two."""
-    from wavepaths.raycast.numpy_caster import NumpyRayCaster
-
-    scene = _street_canyon(moved)
-    a, b = _segments(scene, rng, 4000)
-    exact = NumpyRayCaster(scene)
-    for x, y in ((a, b), (b, a)):
-        expect = exact.occluded(x, y)
-        caster = EmbreeRayCaster(scene)
-        np.testing.assert_array_equal(caster.occluded(x, y, free_start=True), expect)
-    free_a, free_b = a[:4000], b[:4000]  # the free segments: both ends in the open
-    clear = ~exact.occluded(free_a, free_b)
-    halves, one = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
-    halves.occluded(free_a[clear], free_b[clear])
-    one.occluded(free_a[clear], free_b[clear], free_start=True)
-    assert clear.sum() > 1000
-    assert one.rays_cast <= clear.sum() < halves.rays_cast  # one ray or none (outside the box) each
-
-
-@needs_numba
-@pytest.mark.parametrize("free_start", [False, True])
-def test_legs_read_from_the_chains_decide_like_the_gathered_segments(free_start, rng):
+def test_legs_read_from_the_chains_decide_like_the_gathered_segments(rng):
     """``occluded_legs(V, alive, i, j)`` (the rays made from the chains' array) answers what
     ``occluded(V[alive, i], V[alive, j])`` answers, leg by leg, with the same ray count; and
     the degenerate-chain kernel of ``occluded_chains`` flags what its numpy form flags."""
@@ -91,8 +66,8 @@ def test_legs_read_from_the_chains_decide_like_the_gathered_segments(free_start,
     alive = np.sort(rng.choice(len(V), len(V) // 2, replace=False))
     for i, j in ((0, 1), (2, 1), (1, 2)):
         gathered, legs = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
-        expect = gathered.occluded(V[alive, i], V[alive, j], free_start=free_start)
-        np.testing.assert_array_equal(legs.occluded_legs(V, alive, i, j, free_start=free_start), expect)
+        expect = gathered.occluded(V[alive, i], V[alive, j])
+        np.testing.assert_array_equal(legs.occluded_legs(V, alive, i, j), expect)
         assert legs.rays_cast == gathered.rays_cast
         assert 0.05 < expect.mean() < 0.95
     W = V.copy()

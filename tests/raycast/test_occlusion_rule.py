@@ -22,17 +22,12 @@ WALL = [[-5, 0, 0], [5, 0, 0], [5, 0, 4], [-5, 0, 4]]  # y = 0, two triangles, d
 
 
 def both_casters(scene, a, b):
-    """(k,) bool, asserting the two casters and the two directions all agree bit for bit,
-    also with the ``free_start`` hint given for either end (here often wrong: the ends lie
-    on faces, edges and vertices, where the hint's single ray must leave the segment
-    undecided rather than decide it wrongly)."""
+    """(k,) bool, asserting the two casters and the two directions all agree bit for bit."""
     a, b = np.atleast_2d(np.asarray(a, float)), np.atleast_2d(np.asarray(b, float))
     out = []
     for caster in (NumpyRayCaster(scene), EmbreeRayCaster(scene), EmbreeRayCaster(scene, compiled=False)):
         fwd, bwd = caster.occluded(a, b), caster.occluded(b, a)
         np.testing.assert_array_equal(fwd, bwd)
-        np.testing.assert_array_equal(caster.occluded(a, b, free_start=True), fwd)
-        np.testing.assert_array_equal(caster.occluded(b, a, free_start=True), fwd)
         out.append(fwd)
     np.testing.assert_array_equal(out[0], out[1])
     np.testing.assert_array_equal(out[0], out[2])

@@ -282,12 +282,3 @@ def test_path_order_does_not_depend_on_the_order_the_search_found_them():
     got = assemble(tx, rx, shuffled, dict(stats))
     for name in ("tx_index", "rx_index", "depth", "interactions", "primitive", "triangle", "wedge_faces", "vertices"):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
-    # unsorted (a coverage tile's sums): the same paths, in the batches' order
-    raw = assemble(tx, rx, batches, dict(stats), sort=False)
-    assert len(raw) == len(ref) and raw.vertices.shape == ref.vertices.shape
-    first = np.concatenate([b.rx_index for b in batches if len(b.rx_index)])
-    np.testing.assert_array_equal(raw.rx_index, first)
-    perm = np.lexsort((raw.lengths, raw.depth, raw.rx_index, raw.tx_index))
-    back = np.lexsort((ref.lengths, ref.depth, ref.rx_index, ref.tx_index))
-    np.testing.assert_allclose(raw.lengths[perm], ref.lengths[back], rtol=1e-15, atol=0)
-    np.testing.assert_array_equal(np.sort(raw.primitive, axis=0), np.sort(ref.primitive, axis=0))

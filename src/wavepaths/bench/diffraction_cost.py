@@ -68,7 +68,9 @@ STAGES = [
 
 def stage_times(fn) -> dict:
     """Seconds per stage of ``fn()`` (a coverage map) under cProfile: :data:`STAGES`, the
-    rest (``"other"``) and ``"total"``. Read the shares: the profiler inflates Python calls."""
+    rest (``"other"``) and ``"total"``. Read the shares: the profiler inflates Python calls.
+    Meant for maps without ``tolerance_db``, whose diffracted legs are cast after the search
+    (outside ``diffraction_tile``): there the join stage would come out short."""
     import cProfile
     import pstats
 

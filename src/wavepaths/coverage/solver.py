@@ -251,7 +251,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     m, k = len(ctx.tx), len(rx)
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
-    paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
+    paths = assemble(ctx.tx, rx, batches, dict(stats))
     pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
@@ -260,7 +260,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
         # the fields again, with every path: a diffraction term next to a shadow or reflection
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
-        paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
+        paths = assemble(ctx.tx, rx, batches, dict(stats))
         pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at

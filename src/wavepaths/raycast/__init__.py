@@ -54,13 +54,11 @@ if TYPE_CHECKING:  # pragma: no cover
 class RayCaster(Protocol):
     """Answers batched segment-occlusion queries for one scene."""
 
-    def occluded(self, a: np.ndarray, b: np.ndarray, free_start: bool = False) -> np.ndarray:
+    def occluded(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(k,) bool: whether the segment ``a[i] -> b[i]`` ((k, 3) float64, metres) is blocked.
 
         By the rule of :mod:`wavepaths.raycast`: end points may lie on surfaces; the
-        answer does not depend on the order of the ends. ``free_start``: a hint that the
-        ``a`` ends lie off every surface (a transmitter or receiver in the open), which a
-        caster may use to cast fewer rays; it never changes the rule.
+        answer does not depend on the order of the ends.
         """
         ...
 

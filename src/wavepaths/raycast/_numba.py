@@ -125,27 +125,6 @@ def segment_rays(origin, target, lo, hi):
 
 
 @numba.njit(cache=True, nogil=True)
-def leg_rays(V, alive, i, j, center, lo, hi):
-    """The legs ``V[alive, i] -> V[alive, j]`` of chains ``V`` (k, s, 3) as rays from their
-    ``i`` ends (EmbreeRayCaster.occluded_legs with ``free_start``): the ends recentred on
-    ``center``, ``A`` and ``B`` (m, 3), as ``a - center`` and ``b - center`` give them, and the
-    rays of :func:`segment_rays` from ``A`` to ``B``, without the gathered copies."""
-    m = alive.shape[0]
-    A = np.empty((m, 3))
-    B = np.empty((m, 3))
-    rows, start, unit, span = _ray_buffers(m)
-    cnt = 0
-    for r in range(m):
-        c = alive[r]
-        for x in range(3):
-            A[r, x] = V[c, i, x] - center[x]
-            B[r, x] = V[c, j, x] - center[x]
-        cnt = _add_ray((A[r, 0], A[r, 1], A[r, 2]), (B[r, 0], B[r, 1], B[r, 2]), lo, hi, r, cnt, rows, start, unit,
-                       span)
-    return A, B, rows[:cnt], start[:cnt], unit[:cnt], span[:cnt]
-
-
-@numba.njit(cache=True, nogil=True)
 def leg_canonical_recentred(V, alive, i, j, center):
     """:func:`canonical_recentred` of the legs ``V[alive, i] -> V[alive, j]`` without the gathered copies."""
     m = alive.shape[0]

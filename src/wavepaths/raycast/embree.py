@@ -149,15 +149,7 @@ class EmbreeRayCaster:
         with ThreadPoolExecutor(max_workers=n) as pool:
             return np.concatenate(list(pool.map(lambda i: part(cuts[i], cuts[i + 1]), range(n))))
 
-    def occluded(self, a: np.ndarray, b: np.ndarray, free_start: bool = False) -> np.ndarray:
-        """(k,) bool: whether the segment ``a[i] -> b[i]`` is blocked (:class:`RayCaster`).
-
-        ``free_start``: a hint that the ``a`` ends lie off every surface (a transmitter or
-        a receiver in the open). Each segment is then first cast as one ray from ``a`` over
-        its whole length (:meth:`_from_free_ends`), and only the segments that ray leaves
-        undecided are cast as two half-rays. The answer follows the same rule either way:
-        a wrong hint (an ``a`` on a face) costs the two half-rays, never a wrong answer.
-        """
+    def occluded(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
         k = len(a)
@@ -166,15 +158,15 @@ class EmbreeRayCaster:
             return blocked
         if self._kernels is not None:
             n = self._threads(k)
-            one = self._occluded_free_compiled if free_start else self._occluded_compiled
             if n <= 1:
-                return one(a, b)
+                return self._occluded_compiled(a, b)
             # Embree and the compiled set-up release the GIL: contiguous slices on n threads
             from concurrent.futures import ThreadPoolExecutor
 
             cuts = np.linspace(0, k, n + 1).astype(int)
             with ThreadPoolExecutor(max_workers=n) as pool:
-                parts = list(pool.map(lambda i: one(a[cuts[i] : cuts[i + 1]], b[cuts[i] : cuts[i + 1]]), range(n)))
+                parts = list(pool.map(lambda i: self._occluded_compiled(a[cuts[i] : cuts[i + 1]],
+                                                                        b[cuts[i] : cuts[i + 1]]), range(n)))
             return np.concatenate(parts)
         a, b, _ = canonical(a - self._center, b - self._center)
         d = b - a
@@ -197,48 +189,21 @@ class EmbreeRayCaster:
             blocked[rest] = self._exact.blocked(a[rest], b[rest])
         return blocked
 
-    def occluded_legs(self, V: np.ndarray, alive: np.ndarray, i: int, j: int, free_start: bool = False) -> np.ndarray:
+    def occluded_legs(self, V: np.ndarray, alive: np.ndarray, i: int, j: int) -> np.ndarray:
         """:meth:`occluded` of the legs ``V[alive, i] -> V[alive, j]`` of chains ``V`` (k, s, 3).
 
-        The same answers as ``occluded(V[alive, i], V[alive, j], free_start)``; with the
-        compiled kernels on one thread, the legs are read from ``V`` where the rays are made
-        (:func:`wavepaths.raycast._numba.leg_rays`), without the two gathered copies.
+        The same answers as ``occluded(V[alive, i], V[alive, j])``; with the compiled kernels
+        on one thread, the ends are read from ``V`` where they are put in canonical order and
+        recentred (:func:`wavepaths.raycast._numba.leg_canonical_recentred`), without the two
+        gathered copies.
         """
         if self._kernels is None or self._threads(len(alive)) > 1:
-            return self.occluded(V[alive, i], V[alive, j], free_start=free_start)
-        K = self._kernels
-        V = np.ascontiguousarray(V, dtype=np.float64)
-        alive = np.ascontiguousarray(alive, dtype=np.int64)
+            return self.occluded(V[alive, i], V[alive, j])
         if len(alive) == 0:
             return np.zeros(0, dtype=bool)
-        if free_start:
-            A, B, rows, start, unit, span = K.leg_rays(V, alive, i, j, self._center, self._lo, self._hi)
-            return self._free_core(A, B, rows, start, unit, span,
-                                   lambda rest: self._occluded_compiled(V[alive[rest], i], V[alive[rest], j]))
-        return self._halves_core(*K.leg_canonical_recentred(V, alive, i, j, self._center))
-
-    def _occluded_free_compiled(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """:meth:`occluded` of segments whose ``a`` ends lie in the open (``free_start``).
-
-        One ray per segment, from ``a`` to ``b`` (recentred, clipped to the scene's box, float32
-        for Embree). Its nearest face decides, by the float64 rule of :meth:`_occluded_compiled`'s
-        confirmation (:func:`wavepaths.raycast._numba.confirm_hits`, ``b`` the target end):
-
-        * no face on the ray: clear;
-        * a face the segment crosses: blocked;
-        * a face holding ``b`` in its plane (the surface ``b`` lies on): nothing nearer
-          blocks, clear;
-        * anything else (a face at ``a`` itself, a graze, a crossing next to a face's edge):
-          undecided, and decided by :meth:`_occluded_compiled` (two half-rays, in canonical
-          order).
-
-        A clear segment costs one ray instead of two. On the street-canyon R2+D1 map the legs
-        from the transmitter and to the receivers are three quarters of the segments cast.
-        """
-        c = np.ascontiguousarray
-        A, B = c(a - self._center), c(b - self._center)
-        rows, start, unit, span = self._kernels.segment_rays(A, B, self._lo, self._hi)
-        return self._free_core(A, B, rows, start, unit, span, lambda rest: self._occluded_compiled(a[rest], b[rest]))
+        V = np.ascontiguousarray(V, dtype=np.float64)
+        alive = np.ascontiguousarray(alive, dtype=np.int64)
+        return self._halves_core(*self._kernels.leg_canonical_recentred(V, alive, i, j, self._center))
 
     def _embree_first(self, start: np.ndarray, unit: np.ndarray, span: np.ndarray) -> np.ndarray:
         """(n,) int32: the nearest triangle on each float32 ray (-1: none), in batches; counted."""
@@ -250,22 +215,6 @@ class EmbreeRayCaster:
         with _COUNT_LOCK:
             self._rays += len(start)
         return prim
-
-    def _free_core(self, A, B, rows, start, unit, span, undecided) -> np.ndarray:
-        """:meth:`_occluded_free_compiled` from the recentred ends and their rays; ``undecided(rest)``
-        decides the segments ``rest`` the single ray leaves open."""
-        K, ex = self._kernels, self._exact
-        prim = self._embree_first(start, unit, span)
-        blocked = np.zeros(len(A), dtype=bool)
-        hit = prim >= 0
-        seg, p = rows[hit], prim[hit].astype(np.int64)
-        verdict = K.confirm_hits(A, B, seg, p, False, ex.normal, ex.offset, ex.tol, ex.inward, ex.inward_offset,
-                                 ex.edge_tol)
-        blocked[seg[verdict == 1]] = True
-        rest = seg[verdict >= 2]
-        if len(rest):
-            blocked[rest] = undecided(rest)
-        return blocked
 
     def _occluded_compiled(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """:meth:`occluded` with the set-up and the float64 confirmation compiled (same steps)."""

@@ -432,9 +432,7 @@ class NumpyRayCaster:
     def rays_cast(self) -> int:
         return self._rays
 
-    def occluded(self, a: np.ndarray, b: np.ndarray, free_start: bool = False) -> np.ndarray:
-        """(k,) bool: whether the segment ``a[i] -> b[i]`` is blocked; ``free_start`` (a hint
-        for the Embree caster) changes nothing here."""
+    def occluded(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
         a, b, _ = canonical(a - self._exact.center, b - self._exact.center)

@@ -65,14 +65,10 @@ def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact:
     for j in leg_order(s - 1):
         if len(alive) == 0:
             break
-        # a leg from the transmitter or to the receiver is cast from that end, which lies in
-        # the open (a hint; an end on a face costs two half-rays, never a wrong answer)
-        free = s > 2 and j in (0, s - 2)
-        i0, i1 = ((0, 1) if j == 0 else (s - 1, s - 2)) if free else (j, j + 1)
         if legs is not None:
-            hit = legs(vertices, alive, i0, i1, free_start=free)
+            hit = legs(vertices, alive, j, j + 1)
         else:
-            hit = caster.occluded(vertices[alive, i0], vertices[alive, i1], free_start=free)
+            hit = caster.occluded(vertices[alive, j], vertices[alive, j + 1])
         stats["rays_cast"] += len(alive)
         blocked[alive[hit], j] = True
         alive = alive[~hit]

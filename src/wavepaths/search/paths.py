@@ -219,13 +219,11 @@ class PathBatch:
     vertices: np.ndarray  # (k, d + 2, 3)
 
 
-def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True) -> Paths:
+def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict) -> Paths:
     """Concatenate path batches of different depths into one padded, sorted :class:`Paths`.
 
     Paths are sorted by (tx, rx, depth, length), then by their interactions and primitives,
     so that the output order is deterministic and independent of the batches' order.
-    ``sort=False`` keeps them in the batches' order (a coverage tile, which only sums each
-    cell's paths: the sort was 3 % of the street-canyon R2+D1 map).
     """
     batches = [b for b in batches if len(b.tx_index)]
     dmax = max([b.interactions.shape[1] for b in batches], default=0)
@@ -252,15 +250,13 @@ def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: di
     txi = np.concatenate([b.tx_index for b in batches])
     rxi = np.concatenate([b.rx_index for b in batches])
     vertices = np.concatenate(verts)
+    d = np.diff(vertices, axis=1)
+    lengths = np.sqrt(np.einsum("nsj,nsj->ns", d, d)).sum(axis=1)
     kinds = np.concatenate([pad(b.interactions, dmax, 0) for b in batches])
     prims = np.concatenate([pad(b.primitive, dmax, -1) for b in batches])
-    order = slice(None)
-    if sort:
-        d = np.diff(vertices, axis=1)
-        lengths = np.sqrt(np.einsum("nsj,nsj->ns", d, d)).sum(axis=1)
-        # paths of equal length (symmetric scenes) by their interactions: the order does not
-        # depend on the order in which the search found them
-        order = np.lexsort((*prims.T[::-1], *kinds.T[::-1], lengths, depth, rxi, txi))
+    # paths of equal length (symmetric scenes) by their interactions: the order does not
+    # depend on the order in which the search found them
+    order = np.lexsort((*prims.T[::-1], *kinds.T[::-1], lengths, depth, rxi, txi))
     return Paths(
         tx_positions=tx,
         rx_positions=rx,
