@@ -62,6 +62,25 @@ def test_a_segment_in_a_faces_plane_is_not_blocked_by_it():
     assert not both_casters(s, [[-1, 0, 1]], [[2, 0, 1]]).any()  # inside it
 
 
+@pytest.mark.parametrize("shift", [0.0, 1e6], ids=["rotated", "rotated_at_1e6_m"])
+def test_a_segment_in_a_walls_plane_is_blocked_by_a_shelf_through_the_wall(shift, rng):
+    """Both ends on a wall, the segment in the wall's plane, a shelf crossing the wall between
+    them: blocked by the shelf. Rotated by 37 degrees the float32 half-rays graze the wall
+    itself on the way, whose plane holds the target end; taking that for "this half is
+    clear" let 30 of these 2,000 segments through. A face holding both ends in its plane
+    proves nothing about where the ray met it: such hits are decided in float64."""
+    wall = [[0, -10, 0], [0, 10, 0], [0, 10, 10], [0, -10, 10]]
+    shelf = [[-1, -10, 5], [1, -10, 5], [1, 10, 5], [-1, 10, 5]]
+    c, s_ = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
+    R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+    t = np.array([shift, -2 * shift, 30.0])
+    scene = transformed(quads_scene([wall, shelf]), R, t)
+    n = 2000
+    a = np.c_[np.zeros(n), rng.uniform(-9, 9, n), rng.uniform(0.5, 4.5, n)] @ R.T + t
+    b = np.c_[np.zeros(n), rng.uniform(-9, 9, n), rng.uniform(5.5, 9.5, n)] @ R.T + t
+    assert both_casters(scene, a, b).all()
+
+
 def test_a_segment_over_a_roof_in_its_plane_grazes_the_walls_top_edge():
     """touching_blocks-like: a block 0..4 x 0..4 x 0..6. The segment lies in the roof's plane
     z = 6, crosses the roof and leaves it over the top edge of the wall y = 0: it runs along

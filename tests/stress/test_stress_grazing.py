@@ -268,3 +268,31 @@ def test_grazing_and_coplanar_segments_are_reciprocal(name, a, b):
     q = reported(lambda: trace(s, b, a, opts), allow_on_face=True)
     assert p is not None and q is not None
     assert set(path_table(p)) == set(path_table(q, reverse=True))
+
+
+@pytest.mark.filterwarnings("ignore::wavepaths.scene.model.WavepathsWarning")
+def test_receivers_on_a_rotated_wall_get_no_path_through_a_shelf():
+    """Receivers on a wall (a stated edge case), below a shelf that crosses it, and a flush
+    neighbouring wall whose vertical edge diffracts: every leg of every path the search
+    returns is clear by the float64 caster. The legs from the edge to a receiver lie in the
+    wall's plane; before in-plane hits were decided in float64, 9 of these diffracted paths
+    passed through the shelf (rotated scene, float32 grazing hits on the wall)."""
+    from wavepaths.raycast.numpy_caster import NumpyRayCaster
+    from wavepaths.scene import transformed
+
+    w1 = [[0, -10, 0], [0, 0, 0], [0, 0, 10], [0, -10, 10]]
+    w2 = [[0, 2, 0], [0, 10, 0], [0, 10, 10], [0, 2, 10]]
+    shelf = [[-1, -10, 5], [1, -10, 5], [1, 10, 5], [-1, 10, 5]]
+    c, s = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    scene = transformed(quads_scene([w1, w2, shelf]), R, np.zeros(3))
+    rng = np.random.default_rng(0)
+    rx = np.c_[np.zeros(400), rng.uniform(-9, -1, 400), rng.uniform(0.5, 4.5, 400)] @ R.T
+    tx = np.array([[3.0, 6.0, 9.5]]) @ R.T
+    paths = trace(scene, tx, rx, TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0))
+    assert (paths.depth == 1).sum() > 500  # the case is not empty
+    exact = NumpyRayCaster(scene)
+    for depth in np.unique(paths.depth):
+        v = paths.vertices[paths.depth == depth][:, : depth + 2]
+        legs = exact.occluded(v[:, :-1].reshape(-1, 3), v[:, 1:].reshape(-1, 3))
+        assert not legs.any()

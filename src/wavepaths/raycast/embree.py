@@ -56,9 +56,10 @@ class EmbreeRayCaster:
        towards ``b`` and from its point at 3/4 towards ``a``; they overlap, so a face
        through the middle is inside both. Embree returns the nearest face along each ray.
        That face either blocks the segment by the float64 rule (blocked), or contains the
-       ray's target end in its plane (the ray reached the surface the end point lies on:
-       nothing nearer blocks, this half is clear), or neither (a float32 graze: the
-       segment is decided in float64 against the whole scene).
+       ray's target end in its plane and not the other end (the ray reached the surface
+       the end point lies on: nothing nearer blocks, this half is clear), or neither (a
+       float32 graze, or a segment lying in the face's plane, which the ray may graze
+       anywhere: the segment is decided in float64 against the whole scene).
 
     No end is pulled in or lifted: a face within any distance of an end point is seen
     (down to float32 resolution), and an end lying on a face does not hit it.
@@ -182,7 +183,10 @@ class EmbreeRayCaster:
             confirmed = self._exact.crosses(a[h], b[h], p)
             blocked[h[confirmed]] = True
             h, p = h[~confirmed], p[~confirmed]
-            uncertain[h[~self._exact.in_plane(target[h], p)]] = True
+            # clear up to the target end only where the face holds the target end and not the
+            # other one: a segment lying in the face's plane may graze it anywhere
+            far = b if target is a else a
+            uncertain[h[~(self._exact.in_plane(target[h], p) & ~self._exact.in_plane(far[h], p))]] = True
         rest = np.nonzero(uncertain & ~blocked)[0]
         if len(rest):
             self.exact_fallbacks += len(rest)
@@ -247,7 +251,8 @@ class EmbreeRayCaster:
                 confirmed = ex.crosses(A[s3], B[s3], p3)
                 blocked[s3[confirmed]] = True
                 s3, p3 = s3[~confirmed], p3[~confirmed]
-                uncertain[s3[~ex.in_plane((A if second else B)[s3], p3)]] = True
+                target, far = (A, B) if second else (B, A)
+                uncertain[s3[~(ex.in_plane(target[s3], p3) & ~ex.in_plane(far[s3], p3))]] = True
         rest = np.nonzero(uncertain & ~blocked)[0]
         if len(rest):
             with _COUNT_LOCK:
