@@ -15,6 +15,18 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _put_canonical(p0, p1, p2, q0, q1, q2, A, B, live, r):
+    """Write the recentred ends ``p``, ``q`` in canonical order as row ``r`` of ``A``, ``B``, and
+    whether they differ in ``live[r]``: lexicographic order, as canonical() (which compares
+    the recentred ends)."""
+    if q0 < p0 or (q0 == p0 and (q1 < p1 or (q1 == p1 and q2 < p2))):
+        p0, p1, p2, q0, q1, q2 = q0, q1, q2, p0, p1, p2
+    A[r, 0], A[r, 1], A[r, 2] = p0, p1, p2
+    B[r, 0], B[r, 1], B[r, 2] = q0, q1, q2
+    live[r] = p0 != q0 or p1 != q1 or p2 != q2
+
+
 @numba.njit(cache=True, nogil=True)
 def canonical_recentred(a, b, center):
     """(k, 3), (k, 3), (k,) bool: the ends in canonical order (wavepaths.raycast.canonical),
@@ -24,15 +36,8 @@ def canonical_recentred(a, b, center):
     B = np.empty((k, 3))
     live = np.empty(k, dtype=np.bool_)
     for i in range(k):
-        p0, p1, p2 = a[i, 0] - center[0], a[i, 1] - center[1], a[i, 2] - center[2]
-        q0, q1, q2 = b[i, 0] - center[0], b[i, 1] - center[1], b[i, 2] - center[2]
-        # lexicographic order, as canonical() (which compares the recentred ends)
-        swap = q0 < p0 or (q0 == p0 and (q1 < p1 or (q1 == p1 and q2 < p2)))
-        if swap:
-            p0, p1, p2, q0, q1, q2 = q0, q1, q2, p0, p1, p2
-        A[i, 0], A[i, 1], A[i, 2] = p0, p1, p2
-        B[i, 0], B[i, 1], B[i, 2] = q0, q1, q2
-        live[i] = p0 != q0 or p1 != q1 or p2 != q2
+        _put_canonical(a[i, 0] - center[0], a[i, 1] - center[1], a[i, 2] - center[2],
+                       b[i, 0] - center[0], b[i, 1] - center[1], b[i, 2] - center[2], A, B, live, i)
     return A, B, live
 
 
@@ -133,14 +138,8 @@ def leg_canonical_recentred(V, alive, i, j, center):
     live = np.empty(m, dtype=np.bool_)
     for r in range(m):
         c = alive[r]
-        p0, p1, p2 = V[c, i, 0] - center[0], V[c, i, 1] - center[1], V[c, i, 2] - center[2]
-        q0, q1, q2 = V[c, j, 0] - center[0], V[c, j, 1] - center[1], V[c, j, 2] - center[2]
-        swap = q0 < p0 or (q0 == p0 and (q1 < p1 or (q1 == p1 and q2 < p2)))
-        if swap:
-            p0, p1, p2, q0, q1, q2 = q0, q1, q2, p0, p1, p2
-        A[r, 0], A[r, 1], A[r, 2] = p0, p1, p2
-        B[r, 0], B[r, 1], B[r, 2] = q0, q1, q2
-        live[r] = p0 != q0 or p1 != q1 or p2 != q2
+        _put_canonical(V[c, i, 0] - center[0], V[c, i, 1] - center[1], V[c, i, 2] - center[2],
+                       V[c, j, 0] - center[0], V[c, j, 1] - center[1], V[c, j, 2] - center[2], A, B, live, r)
     return A, B, live
 
 
