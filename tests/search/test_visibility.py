@@ -199,6 +199,32 @@ def test_image_windows_hold_every_edge_point_whose_leg_from_the_mirror_is_clear(
     assert v.hidden.sum() >= 5
 
 
+def test_image_window_ends_in_the_mirrors_plane_are_open_without_float64_casts():
+    """An edge end lying in the image's mirror plane (the mirror's own edges, coplanar faces'
+    edges) is its own crossing point of that plane: the leg from the mirror to it has no
+    length and the end is kept open (a window only proves hidden). Cast instead, rounding
+    gave such legs a length of ~1e-10 m in the plane, each decided in float64 against the
+    whole scene: 320 on the street canyon moved to 1e6 m and rotated; on munich's R2+D2
+    context the float64 fallbacks fell from 284 k (1.4 M once in-plane hits were decided in
+    float64) to 6,866."""
+    from wavepaths.scene import transformed
+
+    c_, s_ = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
+    R, t = np.array([[c_, -s_, 0.0], [s_, c_, 0.0], [0.0, 0.0, 1.0]]), np.array([1e6, -2e6, 30.0])
+    scene = transformed(load_scene("street_canyon"), R, t)
+    lv, c, d, lo, hi = _order_1_pairs_with_apertures(scene, np.array([[-60.0, 0.0, 10.0], [20.0, -5.0, 1.5]]) @ R.T + t)
+    dh, q = scene.dihedra, lv.polygons[c, -1]
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    L = dh.length[d]
+    ends = (dh.origin[d], dh.origin[d] + L[:, None] * dh.direction[d])
+    in_plane = [np.abs(np.einsum("ij,ij->i", e, scene.polygon_normal[q]) - scene.polygon_offset[q]) <= tol for e in ends]
+    before = scene.raycaster.exact_fallbacks
+    v = visibility_windows(scene, lv.last[c], d, start=(lo, hi), through=q)
+    assert in_plane[0].sum() + in_plane[1].sum() > 100  # not vacuous
+    assert scene.raycaster.exact_fallbacks - before <= 5
+    assert v.open0[in_plane[0] & (lo <= v.tau)].all() and v.open1[in_plane[1] & (hi >= L - v.tau)].all()
+
+
 def test_image_windows_in_blocks_equal_one_call(monkeypatch):
     """The context computes the images' windows in blocks of pairs (bounded memory); a block
     boundary changes nothing: each pair's march is its own."""

@@ -338,9 +338,16 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
     if through is None:
         open_ends = ~caster.occluded(np.concatenate([S, S]), ends)
     else:  # the leg from the mirror's plane; kept open where the segment does not cross it
-        X, crosses = _mirror_crossing(np.concatenate([Sr, Sr]), ends - c0, np.concatenate([pn, pn]),
-                                      np.concatenate([po, po]))
-        open_ends = ~crosses | ~caster.occluded(X + c0, ends)
+        pn2, po2 = np.concatenate([pn, pn]), np.concatenate([po, po])
+        X, crosses = _mirror_crossing(np.concatenate([Sr, Sr]), ends - c0, pn2, po2)
+        # an end in the mirror's own plane (an edge of the mirror or of a face coplanar with
+        # it) is its own crossing point, up to rounding: the leg has no length, and is kept
+        # open (a window only proves hidden) instead of being cast in float64
+        in_plane = np.abs(np.einsum("ij,ij->i", ends - c0, pn2) - po2) <= scene.length_tolerance(
+            scene.tolerances.plane_distance)
+        cast = np.nonzero(crosses & ~in_plane)[0]
+        open_ends = np.ones(len(ends), dtype=bool)
+        open_ends[cast] = ~caster.occluded(X[cast] + c0, ends[cast])
     if start is not None:  # an end outside the starting window stays outside
         open_ends &= np.concatenate([np.asarray(start[0]) <= tau, np.asarray(start[1]) >= L - tau])
     rays += 2 * len(d)
