@@ -144,13 +144,15 @@ def leg_canonical_recentred(V, alive, i, j, center):
 
 
 @numba.njit(cache=True, nogil=True)
-def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_offset, edge_tol):
+def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_offset, edge_tol, reached):
     """(k,) int8: the float64 verdict on each hit ``prim[r]`` of segment ``seg[r]``'s half-ray.
 
-    0: the face does not block and contains the ray's target end in its plane, and not the
-    other end (this half is clear); 1: the face blocks the segment (ExactSegments.crosses);
-    2: neither (a float32 graze, or a segment lying in the face's plane: the segment is
-    decided against the whole scene); 3: the segment crosses
+    0: the face does not block, contains the ray's target end in its plane and not the
+    other end, and the ray met it at the target end (``reached[r]``: its float32 hit
+    distance within the caster's reach tolerance of the ray's length): this half is clear;
+    1: the face blocks the segment (ExactSegments.crosses); 2: neither (a float32 graze
+    short of the target, or a segment lying in the face's plane: the segment is decided
+    against the whole scene); 3: the segment crosses
     the face next to one of its edges (within the plane tolerance), where crosses() also
     checks for a graze along a coplanar face's boundary: left to the numpy reference.
     """
@@ -185,6 +187,6 @@ def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_of
             # clear. A segment in the face's plane (both ends in it) may graze the face anywhere
             # in float32, short of a face that blocks it: decided in float64 (2)
             s_target, s_far = (sa, sb) if second else (sb, sa)
-            verdict = 0 if abs(s_target) <= tl and abs(s_far) > tl else 2
+            verdict = 0 if abs(s_target) <= tl and abs(s_far) > tl and reached[r] else 2
         out[r] = verdict
     return out

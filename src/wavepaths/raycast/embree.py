@@ -80,6 +80,10 @@ class EmbreeRayCaster:
         lo, hi = scene.bounds - self._center
         pad = 1e-6 * scene.diagonal + 1e-9
         self._lo, self._hi = lo - pad, hi + pad
+        # how far short of a ray's end a hit may lie and still be "at the end": 64 float32
+        # steps of the largest recentred coordinate
+        self._reach_tol = np.float32(64 * np.finfo(np.float32).eps * max(float(np.abs(self._lo).max()),
+                                                                          float(np.abs(self._hi).max()), 1e-9))
         self._scene = rtcore_scene.EmbreeScene()
         corners = (scene.vertices[scene.triangles] - self._center).astype(np.float32)
         self._mesh = TriangleMesh(self._scene, corners)
@@ -177,16 +181,18 @@ class EmbreeRayCaster:
             sel = todo[~blocked[todo] & ~uncertain[todo]]
             if len(sel) == 0:
                 break
-            prim = self._nearest(origin[sel], target[sel])
+            prim, reached = self._nearest(origin[sel], target[sel], with_reach=True)
             h = sel[prim >= 0]
-            p = prim[prim >= 0]
+            p, reached = prim[prim >= 0], reached[prim >= 0]
             confirmed = self._exact.crosses(a[h], b[h], p)
             blocked[h[confirmed]] = True
-            h, p = h[~confirmed], p[~confirmed]
+            h, p, reached = h[~confirmed], p[~confirmed], reached[~confirmed]
             # clear up to the target end only where the face holds the target end and not the
-            # other one: a segment lying in the face's plane may graze it anywhere
+            # other one (a segment lying in the face's plane may graze it anywhere), and the
+            # ray met it at the target end (a nearly coplanar one may graze it short of it)
             far = b if target is a else a
-            uncertain[h[~(self._exact.in_plane(target[h], p) & ~self._exact.in_plane(far[h], p))]] = True
+            clear = self._exact.in_plane(target[h], p) & ~self._exact.in_plane(far[h], p) & reached
+            uncertain[h[~clear]] = True
         rest = np.nonzero(uncertain & ~blocked)[0]
         if len(rest):
             self.exact_fallbacks += len(rest)
@@ -209,16 +215,21 @@ class EmbreeRayCaster:
         alive = np.ascontiguousarray(alive, dtype=np.int64)
         return self._halves_core(*self._kernels.leg_canonical_recentred(V, alive, i, j, self._center))
 
-    def _embree_first(self, start: np.ndarray, unit: np.ndarray, span: np.ndarray) -> np.ndarray:
-        """(n,) int32: the nearest triangle on each float32 ray (-1: none), in batches; counted."""
+    def _embree_first(self, start: np.ndarray, unit: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) int32 and (n,) bool: the nearest triangle on each float32 ray (-1: none), and
+        whether the ray met it at its far end (hit distance within ``_reach_tol`` of ``span``);
+        in batches; counted."""
         prim = np.full(len(start), -1, dtype=np.int32)
+        reached = np.zeros(len(start), dtype=bool)
         for s in range(0, len(start), self._batch):
-            prim[s : s + self._batch] = self._scene.run(
-                start[s : s + self._batch], unit[s : s + self._batch], dists=span[s : s + self._batch],
-                query="INTERSECT")
+            sl = slice(s, s + self._batch)
+            # (embreex writes the hit distances into the `dists` buffer: a copy goes in)
+            res = self._scene.run(start[sl], unit[sl], dists=span[sl].copy(), query="INTERSECT", output=1)
+            prim[sl] = res["primID"]
+            reached[sl] = res["tfar"] >= span[sl] - self._reach_tol
         with _COUNT_LOCK:
             self._rays += len(start)
-        return prim
+        return prim, reached
 
     def _occluded_compiled(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """:meth:`occluded` with the set-up and the float64 confirmation compiled (same steps)."""
@@ -238,11 +249,11 @@ class EmbreeRayCaster:
             if len(sel) == 0:
                 break
             rows, start, unit, span = K.half_rays(A, B, sel, second, self._lo, self._hi)
-            prim = self._embree_first(start, unit, span)
+            prim, reached = self._embree_first(start, unit, span)
             hit = prim >= 0
             seg, p = sel[rows[hit]], prim[hit].astype(np.int64)
             verdict = K.confirm_hits(A, B, seg, p, second, ex.normal, ex.offset, ex.tol, ex.inward,
-                                     ex.inward_offset, ex.edge_tol)
+                                     ex.inward_offset, ex.edge_tol, reached[hit])
             blocked[seg[verdict == 1]] = True
             uncertain[seg[verdict == 2]] = True
             near = verdict == 3  # a crossing next to a face's edge: the numpy test, with its graze check
@@ -287,9 +298,12 @@ class EmbreeRayCaster:
         with ThreadPoolExecutor(max_workers=n) as pool:
             return np.concatenate(list(pool.map(lambda i: part(cuts[i], cuts[i + 1]), range(n))))
 
-    def _nearest(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """(k,) int: the triangle Embree hits first on the way from ``origin`` to ``target`` (recentred), -1 if none."""
-        if self._kernels is not None:
+    def _nearest(self, origin: np.ndarray, target: np.ndarray, with_reach: bool = False):
+        """(k,) int: the triangle Embree hits first on the way from ``origin`` to ``target`` (recentred), -1 if none.
+
+        ``with_reach``: also (k,) bool, whether the hit lies at ``target`` (its float32 distance
+        within ``_reach_tol`` of the clipped ray's length; numpy form only)."""
+        if self._kernels is not None and not with_reach:
             return self._nearest_compiled(origin, target)
         d = target - origin
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
@@ -314,20 +328,23 @@ class EmbreeRayCaster:
             t_end[outside] = np.where(inside_box, np.minimum(tmax, length[outside]), 0.0)
         live = np.nonzero(t_end > t0)[0]
         prim = np.full(len(origin), -1, dtype=np.int64)
+        reached = np.zeros(len(origin), dtype=bool)
         start = origin + t0[:, None] * unit
         span = t_end - t0
         for s in range(0, len(live), self._batch):
             sel = live[s : s + self._batch]
+            span32 = span[sel].astype(np.float32)
             res = self._scene.run(
                 start[sel].astype(np.float32),
                 unit[sel].astype(np.float32),
-                dists=span[sel].astype(np.float32),
+                dists=span32.copy(),  # embreex writes the hit distances into it
                 query="INTERSECT",
                 output=1,
             )
             prim[sel] = np.asarray(res["primID"], dtype=np.int64)
+            reached[sel] = res["tfar"] >= span32 - self._reach_tol
         self._rays += len(live)
-        return prim
+        return (prim, reached) if with_reach else prim
 
     def __getstate__(self) -> dict:  # Embree handles do not pickle: rebuild on the worker
         raise TypeError("EmbreeRayCaster is rebuilt per process from its Scene; pickle the Scene instead")

@@ -340,11 +340,12 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
     else:  # the leg from the mirror's plane; kept open where the segment does not cross it
         pn2, po2 = np.concatenate([pn, pn]), np.concatenate([po, po])
         X, crosses = _mirror_crossing(np.concatenate([Sr, Sr]), ends - c0, pn2, po2)
-        # an end in the mirror's own plane (an edge of the mirror or of a face coplanar with
-        # it) is its own crossing point, up to rounding: the leg has no length, and is kept
-        # open (a window only proves hidden) instead of being cast in float64
-        in_plane = np.abs(np.einsum("ij,ij->i", ends - c0, pn2) - po2) <= scene.length_tolerance(
-            scene.tolerances.plane_distance)
+        # an end within tau of the mirror's own plane (an edge of the mirror or of a face
+        # coplanar with it) is its own crossing point, up to rounding: the leg is no longer
+        # than about tau over the sine of its grazing angle, and is kept open (a window only
+        # proves hidden; the tiles cast every leg, launched samples included) instead of
+        # being cast in float64
+        in_plane = np.abs(np.einsum("ij,ij->i", ends - c0, pn2) - po2) <= tau
         cast = np.nonzero(crosses & ~in_plane)[0]
         open_ends = np.ones(len(ends), dtype=bool)
         open_ends[cast] = ~caster.occluded(X[cast] + c0, ends[cast])
