@@ -56,10 +56,12 @@ class EmbreeRayCaster:
        towards ``b`` and from its point at 3/4 towards ``a``; they overlap, so a face
        through the middle is inside both. Embree returns the nearest face along each ray.
        That face either blocks the segment by the float64 rule (blocked), or contains the
-       ray's target end in its plane and not the other end (the ray reached the surface
-       the end point lies on: nothing nearer blocks, this half is clear), or neither (a
-       float32 graze, or a segment lying in the face's plane, which the ray may graze
-       anywhere: the segment is decided in float64 against the whole scene).
+       ray's target end in its plane and not the other end, and Embree met it at the ray's
+       far end (its hit distance within ``_reach_tol`` of the ray's length: the ray reached
+       the surface the end point lies on, nothing nearer blocks, this half is clear), or
+       neither (a float32 graze, or a segment lying in or nearly in the face's plane, which
+       the ray may graze short of its end: the segment is decided in float64 against the
+       whole scene).
 
     No end is pulled in or lifted: a face within any distance of an end point is seen
     (down to float32 resolution), and an end lying on a face does not hit it.
