@@ -122,13 +122,12 @@ def test_the_box_prefilter_of_points_inside_closed_changes_no_answer(name, rng, 
     pts = np.concatenate([rng.uniform(lo - 2, hi + 2, (3000, 3)), s.vertices,
                           np.einsum("kij,ki->kj", tri, rng.dirichlet(np.ones(3), 400))])
     got = points_inside_closed(s, pts)
-    s.__dict__.pop("_closed_cache", None)
+    boxes = s.object_boxes
     n = len(s.object_names)
-    monkeypatch.setattr(closed, "_object_boxes", lambda scene: (np.full((n, 3), -np.inf), np.full((n, 3), np.inf)))
+    s.__dict__["object_boxes"] = (np.full((n, 3), -np.inf), np.full((n, 3), np.inf))  # every point near
     ref = points_inside_closed(s, pts)
     np.testing.assert_array_equal(got, ref)
     assert ref.any() and not ref.all()
-    monkeypatch.undo()
+    s.__dict__["object_boxes"] = boxes
     monkeypatch.setattr(closed, "BOX_PAIRS", 7)
-    s.__dict__.pop("_closed_cache", None)
     np.testing.assert_array_equal(points_inside_closed(s, pts), ref)

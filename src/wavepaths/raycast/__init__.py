@@ -62,6 +62,10 @@ class RayCaster(Protocol):
         """
         ...
 
+    def occluded_legs(self, V: np.ndarray, alive: np.ndarray, i: int, j: int) -> np.ndarray:
+        """:meth:`occluded` of the legs ``V[alive, i] -> V[alive, j]`` of chains ``V`` (k, s, 3)."""
+        ...
+
     @property
     def rays_cast(self) -> int:
         """How many rays this caster has cast so far (a per-stage counter)."""

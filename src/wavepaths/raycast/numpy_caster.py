@@ -438,3 +438,7 @@ class NumpyRayCaster:
         a, b, _ = canonical(a - self._exact.center, b - self._exact.center)
         self._rays += len(a)
         return self._exact.blocked(a, b, self._chunk)
+
+    def occluded_legs(self, V: np.ndarray, alive: np.ndarray, i: int, j: int) -> np.ndarray:
+        """:meth:`occluded` of the legs ``V[alive, i] -> V[alive, j]`` of chains ``V`` (k, s, 3)."""
+        return self.occluded(V[alive, i], V[alive, j])

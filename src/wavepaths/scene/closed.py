@@ -199,7 +199,7 @@ def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
     out = np.zeros((len(points), len(scene.object_names)), dtype=bool)
     if len(solid) == 0 or len(points) == 0:
         return out
-    lo, hi = _object_boxes(scene)
+    lo, hi = scene.object_boxes
     pad = scene.length_tolerance(scene.tolerances.plane_distance)
     lo, hi = lo[solid] - pad, hi[solid] + pad
     near = np.zeros(len(points), dtype=bool)
@@ -221,16 +221,13 @@ def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
     return out
 
 
-def _object_boxes(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
+def object_boxes(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
     """(objects, 3) float64 twice: each object's bounding box over its triangles' corners
-    (``+inf`` / ``-inf`` for an object without triangles); cached on the scene."""
-    cache = scene.__dict__.setdefault("_closed_cache", {})
-    if "boxes" not in cache:
-        n = len(scene.object_names)
-        corners = scene.vertices[scene.triangles]  # (t, 3, 3)
-        owner = np.repeat(scene.triangle_object, 3)
-        lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
-        np.minimum.at(lo, owner, corners.reshape(-1, 3))
-        np.maximum.at(hi, owner, corners.reshape(-1, 3))
-        cache["boxes"] = (lo, hi)
-    return cache["boxes"]
+    (``+inf`` / ``-inf`` for an object without triangles); cached as :attr:`Scene.object_boxes`."""
+    n = len(scene.object_names)
+    corners = scene.vertices[scene.triangles].reshape(-1, 3)
+    owner = np.repeat(scene.triangle_object, 3)
+    lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+    np.minimum.at(lo, owner, corners)
+    np.maximum.at(hi, owner, corners)
+    return lo, hi

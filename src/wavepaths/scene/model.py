@@ -177,6 +177,13 @@ class Scene:
         return hidden_polygons(self)
 
     @functools.cached_property
+    def object_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(objects, 3) float64 twice: each object's bounding box (``+inf`` / ``-inf`` without triangles)."""
+        from .closed import object_boxes
+
+        return object_boxes(self)
+
+    @functools.cached_property
     def exact_raycaster(self) -> "RayCaster":
         """Float64 occlusion (numpy), for the few segments that graze an edge."""
         from ..raycast.numpy_caster import NumpyRayCaster

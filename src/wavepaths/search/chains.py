@@ -60,15 +60,10 @@ def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact:
     # receiver back (leg_order)
     blocked = np.zeros((k, s - 1), dtype=bool)
     alive = np.nonzero(~degenerate)[0]
-    caster = scene.raycaster
-    legs = getattr(caster, "occluded_legs", None)
     for j in leg_order(s - 1):
         if len(alive) == 0:
             break
-        if legs is not None:
-            hit = legs(vertices, alive, j, j + 1)
-        else:
-            hit = caster.occluded(vertices[alive, j], vertices[alive, j + 1])
+        hit = scene.raycaster.occluded_legs(vertices, alive, j, j + 1)
         stats["rays_cast"] += len(alive)
         blocked[alive[hit], j] = True
         alive = alive[~hit]
