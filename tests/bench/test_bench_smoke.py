@@ -102,6 +102,15 @@ def test_diffraction_cost_benchmark_reports_per_path_costs():
     from wavepaths.bench.diffraction_cost import run_diffraction_cost
 
     r = run_diffraction_cost(quick=True, progress=lambda m: None)
+    # the headline pair on the default threads, then on one thread (with more than one core)
+    assert r["pairs"][0]["threads"] == r["threads"]
+    if r["threads"] > 1:
+        one = r["pairs"][1]
+        assert (one["on"], one["threads"]) == ("R2+D1", 1)
+        assert r["diffraction_cost_ratio_one_thread"] == one["ratio"]
+        # the same maps whatever the threads
+        assert one["diffracted_paths"] == r["pairs"][0]["diffracted_paths"]
+        assert one["all_paths"] == r["pairs"][0]["all_paths"]
     p = r["pairs"][0]
     assert p["same_geometrical_optics_paths"]
     assert p["diffracted_paths"] > 0 and p["paths_ratio"] > 1

@@ -1,5 +1,6 @@
-"""The same tiles in this process, in a local process pool and on a Dask cluster give
-the same map; the scene and the transmitter context survive pickling."""
+"""The same tiles in this process (on one thread or several), in a local process pool and
+on a Dask cluster give the same map; the scene and the transmitter context survive
+pickling; the automatic choice keeps a small map in this process."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ def grid():
 
 @pytest.fixture(scope="module")
 def in_process(canyon, grid):
-    return coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(workers=1, tile_size=8))
+    return coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(workers=1, threads=1, tile_size=8))
 
 
 def assert_same_map(a, b):
@@ -49,6 +50,41 @@ def test_scene_and_context_pickle_and_solve_the_same_tile(canyon, grid):
     b = solve_tile(scene2, ctx2, FieldConfig(), rx)
     np.testing.assert_array_equal(a.a_total, b.a_total)
     np.testing.assert_array_equal(a.num_paths, b.num_paths)
+
+
+def test_threads_of_this_process_give_the_same_map(canyon, grid, in_process):
+    assert in_process.metadata["workers"] == "in-process"
+    threaded = coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(workers=1, threads=3, tile_size=8))
+    assert threaded.metadata["workers"] == "in-process, 3 threads"
+    assert_same_map(threaded, in_process)
+
+
+def test_a_small_map_stays_in_this_process_a_large_one_goes_to_the_pool(canyon, grid, in_process, monkeypatch):
+    """``workers=None``: the first tile, traced here, predicts the rest; this map's tiles take
+    milliseconds, far below ``POOL_MIN_SECONDS``, so no pool is started. With the threshold
+    at zero the other tiles go to a pool of the machine's cores: the same map either way."""
+    import importlib
+
+    from wavepaths.coverage.solver import default_workers
+
+    parallel = importlib.import_module("wavepaths.coverage.parallel")
+    auto = coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(tile_size=8, threads=2))
+    assert auto.metadata["workers"] == ("in-process, 2 threads" if default_workers() > 1 else "in-process")
+    assert_same_map(auto, in_process)
+    if default_workers() < 2:
+        pytest.skip("one core: the automatic choice never starts a pool")
+    monkeypatch.setattr(parallel, "POOL_MIN_SECONDS", 0.0)
+    pooled = coverage(canyon, [-60, 0, 10], grid, OPTIONS, settings=CoverageOptions(tile_size=8))
+    assert pooled.metadata["workers"].startswith("local pool of ")
+    assert_same_map(pooled, in_process)
+
+
+def test_threads_must_be_positive():
+    from wavepaths.errors import WavepathsError
+
+    for bad in (0, -1, 1.5):
+        with pytest.raises(WavepathsError, match="threads"):
+            CoverageOptions(threads=bad)
 
 
 def test_local_process_pool_gives_the_same_map(canyon, grid, in_process):

@@ -17,13 +17,18 @@ without diffraction, then the same reflections plus diffraction:
   before their casts and fields).
 
 The two maps of a pair are timed in alternation, ``repeats`` times each, and the ratio of
-medians is reported. One process (``workers=1``). Beside it, what a path costs: the map
+medians is reported. One process (``workers=1``), its tiles on the threads the machine's
+cores give (``CoverageOptions.threads``' default, as :func:`wavepaths.coverage.coverage`
+runs a map this small by default); the headline pair again on one thread beside it
+(``diffraction_cost_ratio_one_thread``): diffraction's work releases the GIL and gains
+from the second core, the map without diffraction hardly does. Beside it, what a path costs: the map
 without diffraction per path it finds (``us_per_path_off``), the time diffraction adds per
 diffracted path (``us_per_diffracted_path``), and how many more paths the map with
 diffraction holds (``paths_ratio``): the time ratio is about the paths ratio times the
 ratio of those per-path costs. And where the headline pair's time goes (``stages``): both
-maps once more under cProfile, split into the stages of :data:`STAGES` (the profiler
-inflates Python calls: read the shares).
+maps once more under cProfile, on one thread (the profiler sees only its own thread),
+split into the stages of :data:`STAGES` (the profiler inflates Python calls: read the
+shares).
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..search import kernels
 from .scenes import STREET_CANYON_TX
 from .timing import interleaved
 
@@ -105,21 +111,27 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
     cell = 4.0 if quick else 2.0
     grid = PlanarGrid(center=[0.0, 0.0], height=1.5, size=[176.0, 120.0], cell_size=cell)
     cfg = FieldConfig(3.5e9)
-    settings = CoverageOptions(workers=1)
-    pairs = PAIRS[:1] if quick else PAIRS
+    threads = kernels.threads()
+    pairs = [p + (threads,) for p in (PAIRS[:1] if quick else PAIRS)]
+    if threads > 1:
+        pairs.insert(1, PAIRS[0] + (1,))
     rounds = 1 if quick else repeats
     results = []
     last = {}
 
-    def runner(opts, key="map"):
+    def runner(opts, key="map", n_threads=None):
+        settings = CoverageOptions(workers=1, threads=n_threads)
+
         def run():
             last[key] = coverage(scene, STREET_CANYON_TX, grid, TraceOptions(**opts), fields=cfg, settings=settings)
         return run
 
     runner(PAIRS[0][1])()  # warm-up
-    for off_name, off, on_name, on in pairs:
-        progress(f"benchmark 5: {off_name} against {on_name}, {grid.shape[0]} x {grid.shape[1]} cells")
-        times = interleaved({"off": runner(off, "off"), "on": runner(on, "map")}, rounds if on_name != "R3+D2" else 1)
+    for off_name, off, on_name, on, n_threads in pairs:
+        progress(f"benchmark 5: {off_name} against {on_name}, {grid.shape[0]} x {grid.shape[1]} cells, "
+                 f"{n_threads} thread(s)")
+        times = interleaved({"off": runner(off, "off", n_threads), "on": runner(on, "map", n_threads)},
+                            rounds if on_name != "R3+D2" else 1)
         m = last["map"]
         all_paths = int(np.nansum(m.num_paths))
         diffracted = int(np.nansum(m.num_paths[2]))
@@ -127,7 +139,7 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
         # diffraction adds paths and removes none: the same line-of-sight and reflected paths per cell
         same_go = bool(np.array_equal(np.nan_to_num(m.num_paths[:2]), np.nan_to_num(last["off"].num_paths[:2])))
         t_off, t_on = times["off"].median_s, times["on"].median_s
-        results.append({"off": off_name, "on": on_name, "off_options": off, "on_options": on,
+        results.append({"off": off_name, "on": on_name, "off_options": off, "on_options": on, "threads": n_threads,
                         "off_s": times["off"].as_dict(), "on_s": times["on"].as_dict(),
                         "ratio": t_on / t_off,
                         "cells_traced": int(m.metadata["cells_traced"]),
@@ -138,13 +150,16 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
                         "us_per_diffracted_path": 1e6 * (t_on - t_off) / max(diffracted, 1),
                         "paths_ratio": all_paths / max(off_paths, 1), "same_geometrical_optics_paths": same_go})
     # where the headline pair's time goes: the same two maps under cProfile, stage by stage
-    off_st, on_st = stage_times(runner(PAIRS[0][1], "off")), stage_times(runner(PAIRS[0][3], "map"))
+    off_st, on_st = stage_times(runner(PAIRS[0][1], "off", 1)), stage_times(runner(PAIRS[0][3], "map", 1))
     added = {k: on_st[k] - off_st[k] for k in on_st}
     stages = [{"stage": k, "off_s": off_st[k], "on_s": on_st[k], "added_s": added[k],
                "share_of_added": added[k] / added["total"] if added["total"] > 0 else None}
               for k in [label for label, _, _ in STAGES] + ["other", "total"]]
     return {"scene": "simple_street_canyon", "grid_shape": list(grid.shape), "cell_size_m": cell,
-            "pairs": results, "stages": stages, "diffraction_cost_ratio": results[0]["ratio"], "headline_pair": "R2 / R2+D1",
+            "threads": threads, "pairs": results, "stages": stages, "diffraction_cost_ratio": results[0]["ratio"],
+            "headline_pair": "R2 / R2+D1",
+            "diffraction_cost_ratio_one_thread": next((r["ratio"] for r in results if r["on"] == "R2+D1"
+                                                       and r["threads"] == 1), None),
             # the seed's own case (one diffraction between two fixed points), beside the headline
             "seed_case_ratio": next((r["ratio"] for r in results if r["on"] == "R2+D0"), None),
             "seed_ratio": SEED_RATIO, "target_ratio_max": 3.0}

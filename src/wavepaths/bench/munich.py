@@ -38,10 +38,14 @@ def _write(path: str, data: dict) -> None:
 
 
 def munich_map(progress_file: str, cell_size: float = 2.0, options: dict | None = None, workers: int | None = None) -> dict:
-    """Build the munich coverage map (runs in a child process); return timings and figures."""
+    """Build the munich coverage map (runs in a child process); return timings and figures.
+
+    ``workers``: local processes, by default one per core, started at once (the map is far
+    too large for ``coverage()``'s automatic choice to keep it in this process)."""
     import numpy as np
 
     from ..coverage import CoverageOptions, PlanarGrid, coverage
+    from ..coverage.solver import default_workers
     from ..scene import load_scene
     from ..search import TraceOptions
     from .scenes import sionna_scene_xml
@@ -69,7 +73,7 @@ def munich_map(progress_file: str, cell_size: float = 2.0, options: dict | None 
 
     state["stage"] = "context"
     _write(progress_file, state)
-    m = coverage(scene, np.array([MUNICH_TX]), grid, opts, settings=CoverageOptions(workers=workers),
+    m = coverage(scene, np.array([MUNICH_TX]), grid, opts, settings=CoverageOptions(workers=workers or default_workers()),
                  progress=progress)
     map_s = time.perf_counter() - t_map
     state.update(stage="done", map_s=map_s, cells_done=int(m.metadata["cells_traced"]))

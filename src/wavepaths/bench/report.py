@@ -99,6 +99,7 @@ def headline(results: dict) -> dict:
         "sionna_paths_time_ratio": sp.get("sionna_paths_time_ratio"),
         "diffraction_cost_ratio": dc.get("diffraction_cost_ratio"),
         "diffraction_cost_ratio_seed_case": dc.get("seed_case_ratio"),
+        "diffraction_cost_ratio_one_thread": dc.get("diffraction_cost_ratio_one_thread"),
         "tradeoff_points": points,
     }
     maps_verdict = (to.get("maps") or {}).get("verdict") or {}
@@ -220,7 +221,8 @@ def _fig_diffraction_cost(dc: dict):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 3))
-    labels = [f"{p['off']} / {p['on']}" for p in dc["pairs"]]
+    labels = [f"{p['off']} / {p['on']}" + (", 1 thread" if p.get("threads") == 1 and dc.get("threads", 1) > 1 else "")
+              for p in dc["pairs"]]
     ax.bar(labels, [p["ratio"] for p in dc["pairs"]], color="tab:green")
     ax.axhline(dc["target_ratio_max"], color="r", ls="--", lw=1, label="target 3x")
     ax.axhline(dc["seed_ratio"], color="tab:blue", ls=":", lw=1, label="seed 46x")
@@ -416,15 +418,18 @@ interleaved round by round, and reported as medians over the rounds.</p>
         parts.append("<h2>5. Cost of diffraction</h2>")
         parts.append(f"<p>Coverage map of simple_street_canyon, {dc['grid_shape'][0]} x {dc['grid_shape'][1]} cells of "
                      f"{dc['cell_size_m']:g} m; the seed paid {dc['seed_ratio']:g}x for one diffraction between two fixed "
-                     f"points (its §4), the case of R2 / R2+D0. Headline: {dc['headline_pair']}.</p>")
-        parts.append(_table([[f"{p['off']} / {p['on']}", p["off_s"]["median_s"], p["on_s"]["median_s"], p["ratio"],
+                     f"points (its §4), the case of R2 / R2+D0. Headline: {dc['headline_pair']}. One process, its "
+                     f"tiles on {dc.get('threads', 1)} thread(s) (the default), the headline pair on one thread "
+                     "beside it.</p>")
+        parts.append(_table([[f"{p['off']} / {p['on']}", p.get("threads", 1), p["off_s"]["median_s"], p["on_s"]["median_s"], p["ratio"],
                               p["diffracted_paths"], p["all_paths"], p.get("paths_ratio"), p.get("us_per_path_off"),
                               p.get("us_per_diffracted_path")] for p in dc["pairs"]],
-                            ["pair", "off [s]", "on [s]", "ratio", "diffracted paths (on)", "all paths (on)",
+                            ["pair", "threads", "off [s]", "on [s]", "ratio", "diffracted paths (on)", "all paths (on)",
                              "paths on / off", "us per path (off)", "us per diffracted path (added)"]))
         parts.append(_img(summary["figures"].get("diffraction_cost")))
         if dc.get("stages"):
-            parts.append(f"<p>Where the time of {dc['headline_pair']} goes: both maps once more under cProfile, "
+            parts.append(f"<p>Where the time of {dc['headline_pair']} goes: both maps once more under cProfile, on one "
+                         "thread, "
                          "by stage (the profiler inflates Python calls; read the shares).</p>")
             parts.append(_table([[r["stage"], r["off_s"], r["on_s"], r["added_s"], r["share_of_added"]]
                                  for r in dc["stages"]],
@@ -649,5 +654,5 @@ def _profiles(results: dict, quick: bool, progress) -> dict:
         grid = PlanarGrid(center=[0.0, 0.0], height=1.5, size=[176.0, 120.0], cell_size=4.0 if quick else 2.0)
         out["coverage map R2+D1, simple_street_canyon"] = profile_call(
             lambda: coverage(scene, STREET_CANYON_TX, grid, TraceOptions(max_reflections=2, diffraction_reflections=1),
-                             settings=CoverageOptions(workers=1)))
+                             settings=CoverageOptions(workers=1, threads=1)))
     return out

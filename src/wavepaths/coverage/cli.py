@@ -37,8 +37,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--mesh", metavar="FILE", help="measurement mesh: its faces are the cells (instead of a grid)")
     p.add_argument("--out", default=".", metavar="DIR", help="output folder (default: the current one)")
     par = p.add_mutually_exclusive_group()
-    par.add_argument("--workers", type=int, help="local processes (default: one per core)")
+    par.add_argument("--workers", type=int,
+                     help="local processes; 1: this process (default: this process for a small map, "
+                          "else one per core)")
     par.add_argument("--dask", metavar="ADDRESS", help="run the tiles on the Dask scheduler at ADDRESS")
+    p.add_argument("--threads", type=int, default=None,
+                   help="tiles traced at once on threads when they run in this process (default: one per core)")
     p.add_argument("--tile-size", type=int, default=None,
                    help="cells traced together (default: from the scene's image counts, 16 to 1024)")
     p.add_argument("--incoherent", action="store_true", help="add path powers instead of complex amplitudes")
@@ -94,7 +98,7 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     grid = _grid(args, scene)
     settings = CoverageOptions(tile_size=args.tile_size, coherent=not args.incoherent, workers=args.workers,
-                               mask_inside=not args.keep_inside)
+                               threads=args.threads, mask_inside=not args.keep_inside)
     tx = np.array(args.tx, dtype=float).reshape(-1, 3)
     client = _client(args.dask) if args.dask else None
     try:

@@ -1,4 +1,4 @@
-"""Running coverage tiles: in this process, in a local process pool, or on Dask.
+"""Running coverage tiles: in this process (on threads), in a local process pool, or on Dask.
 
 All three run :func:`wavepaths.coverage.solver.solve_tile` on the same tiles and hand
 each result to the same callback, which writes it into the map by cell index: the order
@@ -9,6 +9,15 @@ worker, since native handles do not pickle), the transmitter context and the fie
 settings, received once, plus the working set of the tile it is running. See
 ``docs/coverage.md`` for the numbers.
 
+* In this process: the tiles on ``threads`` Python threads (the compiled kernels, Embree
+  and numpy's large operations release the GIL; each tile's kernels then run on its own
+  thread), results consumed in tile order.
+* Automatic (``workers=None``): the first tile is traced here and timed; if the other
+  tiles would take less than :data:`POOL_MIN_SECONDS` on one thread they are traced here
+  on threads, else in a local pool. A pool's processes start in 2-3 s (imports, the
+  scene and context unpickled, Embree's BVH rebuilt), which a small map does not win back:
+  ``simple_street_canyon``'s 88 x 60-cell R2+D1 map took 2.5-3.6 s through a pool of two
+  against 0.32 s on two threads here (0.55 s on one).
 * Local pool: ``spawn``-started processes (forking a process that holds Embree's thread
   pool is unsafe) that do not re-run the caller's script (no ``__main__`` guard needed);
   the scene, context and settings travel once per process as the pool's initializer
@@ -22,12 +31,14 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import sys
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from ..errors import DependencyError
+from ..search import kernels
 from .solver import TileSums, default_workers, solve_tile
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -36,6 +47,13 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..search.context import TxContext
 
 OnDone = Callable[[int, TileSums], None]
+
+POOL_MIN_SECONDS = 20.0
+"""With ``workers=None``: the single-thread time of the tiles after the first, as its time
+predicts it, from which they go to a process pool instead of threads of this process. Two
+processes beat two threads by the threads' GIL contention (R2+D1 tiles ran 1.7x faster on
+two threads, GIL-bound R2 tiles not at all) but pay 2-3 s to start: for GIL-bound tiles the
+pool wins from about 6 s of work, for diffraction-heavy tiles from about 30 s."""
 
 # the state a pool process receives once, at start-up
 _WORKER_STATE: tuple | None = None
@@ -49,24 +67,44 @@ def run_tiles(
     on_done: OnDone,
     *,
     workers: int | None = None,
+    threads: int | None = None,
     client=None,
 ) -> str:
     """Solve every tile of cell centres and pass ``(tile index, TileSums)`` to ``on_done``.
 
-    Returns a short description of where the tiles ran (``"in-process"``,
-    ``"local pool of N processes"``, ``"dask <scheduler address>"``).
+    ``workers``, ``threads``: as in :class:`wavepaths.coverage.CoverageOptions`. Returns a
+    short description of where the tiles ran (``"in-process"``, ``"in-process, N
+    threads"``, ``"local pool of N processes"``, ``"dask <scheduler address>"``).
     """
     if not tiles:
         return "none"
     if client is not None:
         return _run_dask(client, scene, ctx, config, tiles, on_done)
-    n = default_workers() if workers is None else int(workers)
-    n = min(n, len(tiles))
+    n_threads = kernels.threads() if threads is None else int(threads)
+    if workers is not None:
+        n = min(int(workers), len(tiles))
+        if n <= 1:
+            return _run_here(scene, ctx, config, tiles, range(len(tiles)), on_done, n_threads)
+        return _run_pool(n, scene, ctx, config, tiles, range(len(tiles)), on_done)
+    n = min(default_workers(), len(tiles))
     if n <= 1:
-        for i, rx in enumerate(tiles):
-            on_done(i, solve_tile(scene, ctx, config, rx))
-        return "in-process"
-    return _run_pool(n, scene, ctx, config, tiles, on_done)
+        return _run_here(scene, ctx, config, tiles, range(len(tiles)), on_done, n_threads)
+    # the first tile here, timed: it predicts what the others cost
+    t = time.perf_counter()
+    on_done(0, solve_tile(scene, ctx, config, tiles[0]))
+    rest = range(1, len(tiles))
+    if (time.perf_counter() - t) * len(rest) < POOL_MIN_SECONDS:
+        return _run_here(scene, ctx, config, tiles, rest, on_done, n_threads)
+    return _run_pool(min(n, len(rest)), scene, ctx, config, tiles, rest, on_done)
+
+
+def _run_here(scene, ctx, config, tiles, which: range, on_done: OnDone, threads: int) -> str:
+    """The tiles ``which`` in this process, on up to ``threads`` threads (1: the calling thread)."""
+    threads = max(1, min(threads, len(which)))
+    solved = kernels.in_threads(lambda i: solve_tile(scene, ctx, config, tiles[i]), list(which), threads)
+    for i, sums in zip(which, solved):
+        on_done(i, sums)
+    return "in-process" if threads == 1 else f"in-process, {threads} threads"
 
 
 # ---- local process pool -------------------------------------------------------------------
@@ -112,13 +150,13 @@ def _main_module_hidden():
                 setattr(main, k, v)
 
 
-def _run_pool(n: int, scene, ctx, config, tiles, on_done: OnDone) -> str:
+def _run_pool(n: int, scene, ctx, config, tiles, which: range, on_done: OnDone) -> str:
     mp = multiprocessing.get_context("spawn")
     with _main_module_hidden(), ProcessPoolExecutor(max_workers=n, mp_context=mp, initializer=_init_worker,
                                                     initargs=(scene, ctx, config)) as pool:
         # keep a bounded number of tiles in flight: results are consumed as they come
         pending = set()
-        it = iter(enumerate(tiles))
+        it = iter((i, tiles[i]) for i in which)
         for i, rx in it:
             pending.add(pool.submit(_pool_tile, i, rx))
             if len(pending) >= 4 * n:

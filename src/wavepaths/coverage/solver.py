@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import WavepathsError
 from ..fields import FieldConfig, compute_fields
 from ..scene.model import Scene
+from ..search import kernels
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble
@@ -67,8 +68,18 @@ class CoverageOptions:
         by power, ``sum |a|^2`` (smoother maps). Both are kept in the map; this picks
         which one its quantities report by default.
     workers : int or None
-        Local processes. ``None``: one per core when there is more than one tile; ``1``:
-        in this process. Ignored when a Dask ``client`` is given.
+        Local processes. ``1``: in this process. ``None`` (default): the first tile is
+        traced in this process, and its time predicts the rest's; a map whose other tiles
+        would take less than :data:`wavepaths.coverage.parallel.POOL_MIN_SECONDS` on one
+        thread stays in this process (a pool's start-up, 2-3 s, would cost more than it
+        saves), a larger one goes to a pool of one process per core. Ignored when a Dask
+        ``client`` is given.
+    threads : int or None
+        Tiles traced at once on threads of this process, when the tiles run in it
+        (``workers=1``, or a small map with ``workers=None``): the compiled kernels and
+        Embree release the GIL. ``None`` (default): the cores numba uses (1 without
+        numba); ``1``: one tile at a time on the calling thread. The map is the same bit
+        for bit whatever the threads.
     mask_inside : bool
         Mark cells inside solid objects NaN and do not trace them
         (:mod:`wavepaths.coverage.inside`). Turn off for scenes whose closed objects are
@@ -81,6 +92,7 @@ class CoverageOptions:
     tile_size: int | None = None
     coherent: bool = True
     workers: int | None = None
+    threads: int | None = None
     mask_inside: bool = True
     max_memory_bytes: int = 4 << 30
 
@@ -89,6 +101,8 @@ class CoverageOptions:
             raise WavepathsError(f"`tile_size` must be None or a positive integer, got {self.tile_size!r}")
         if self.workers is not None and (not isinstance(self.workers, (int, np.integer)) or self.workers < 1):
             raise WavepathsError(f"`workers` must be None or a positive integer, got {self.workers!r}")
+        if self.threads is not None and (not isinstance(self.threads, (int, np.integer)) or self.threads < 1):
+            raise WavepathsError(f"`threads` must be None or a positive integer, got {self.threads!r}")
         if self.max_memory_bytes <= 0:
             raise WavepathsError(f"`max_memory_bytes` must be positive, got {self.max_memory_bytes!r}")
 
@@ -139,7 +153,7 @@ def block_tiles(shape: tuple[int, ...], active: np.ndarray, size: int) -> list[n
     return tiles
 
 
-def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> int:
+def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None, threads: int | None = None) -> int:
     """Cells per tile when :attr:`CoverageOptions.tile_size` is ``None``.
 
     Large tiles amortise the per-call overhead (on ``simple_street_canyon`` at 4 m cells,
@@ -147,19 +161,22 @@ def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> in
     every receiver's image tree up to ``diffraction_reflections``. Estimating a receiver's
     tree by the transmitter's (``ctx.stats``), the tile holds at most
     :data:`TILE_IMAGE_BUDGET` images: ``clamp(budget / images per receiver, 16, 1024)``.
-    With several workers, tiles are also small enough to give each worker two.
+    With several workers (processes, or with ``workers=1`` the ``threads`` of
+    :class:`CoverageOptions`), tiles are also small enough to give each of them two.
     """
     if ctx.options.launched:
         # launched candidates: no receiver image trees, and every tile scans all the rays
         # traced for the map, so the tiles are as large as the workers allow
-        w = 1 if workers == 1 else (workers or default_workers())
+        w = (threads or kernels.threads()) if workers == 1 else (workers or default_workers())
         return int(np.clip(-(-cells // w), 16, LAUNCHED_TILE_MAX))
     per_rx = 1
     if ctx.options.diffraction:
         per_rx += sum(int(ctx.stats.get(f"images_order_{b}", 0)) for b in range(1, ctx.options.diffraction_reflections + 1))
     size = int(np.clip(TILE_IMAGE_BUDGET // per_rx, 16, 1024))
-    if workers is None or workers > 1:
-        w = workers or default_workers()
+    w = workers or default_workers()
+    if w == 1:
+        w = threads or kernels.threads()
+    if w > 1:
         size = min(size, max(16, -(-cells // (2 * w))))
     return size
 
@@ -406,7 +423,7 @@ def coverage(
     power_sum = np.full((3, m, n), np.nan)
     num_paths = np.zeros((3, m, n), np.int32)
     stats: Counter = Counter(ctx.stats)
-    size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers)
+    size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers, cov.threads)
     timings["tile_size"] = size
     if opts.launched and isinstance(grid, PlanarGrid):
         tiles = block_tiles(grid.shape, active, size)
@@ -426,7 +443,7 @@ def coverage(
     t = time.perf_counter()
     try:
         workers = run_tiles(scene, tile_ctx, cfg, [flat[c] for c in tiles], on_done, workers=cov.workers,
-                            client=client)
+                            threads=cov.threads, client=client)
     finally:
         if bar is not None:
             bar.close()
