@@ -282,3 +282,29 @@ def test_path_order_does_not_depend_on_the_order_the_search_found_them():
     got = assemble(tx, rx, shuffled, dict(stats))
     for name in ("tx_index", "rx_index", "depth", "interactions", "primitive", "triangle", "wedge_faces", "vertices"):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+
+
+def test_unsorted_paths_and_their_path_order_give_the_sorted_paths():
+    """``assemble(..., sort=False)`` keeps the batches' order; ``path_order`` of its arrays is
+    the order ``assemble`` sorts by: with ties (the symmetric canyon) and without (receivers
+    off the plane of symmetry, where the one-key sort is taken), the same as sorting on the
+    whole key (tx, rx, depth, length, interactions, primitives)."""
+    from wavepaths.search.context import build_tx_context
+    from wavepaths.search.paths import assemble, path_order
+    from wavepaths.search.tile import trace_tile
+
+    scene = load_scene("street_canyon")
+    tx = np.array([[-60.0, 0.0, 10.0]])
+    opts = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=1)
+    for rx in (np.array([[40.0, 0.0, 1.5], [10.0, 0.0, 1.5]]), np.array([[40.0, 2.3, 1.5], [10.0, -4.1, 1.5]])):
+        batches, stats = trace_tile(scene, build_tx_context(scene, tx, opts), rx)
+        raw = assemble(tx, rx, batches, dict(stats), sort=False)
+        ref = assemble(tx, rx, batches, dict(stats))
+        order = path_order(raw.tx_index, raw.rx_index, raw.depth, raw.lengths, raw.interactions, raw.primitive, len(rx))
+        full = np.lexsort((*raw.primitive.T[::-1], *raw.interactions.T[::-1], raw.lengths, raw.depth, raw.rx_index,
+                           raw.tx_index))
+        np.testing.assert_array_equal(order, full)
+        assert not np.array_equal(order, np.arange(len(order)))  # the batches' order is not the sorted one
+        for name in ("tx_index", "rx_index", "depth", "interactions", "primitive", "triangle", "wedge_faces",
+                     "vertices"):
+            np.testing.assert_array_equal(getattr(raw, name)[order], getattr(ref, name), err_msg=name)

@@ -38,7 +38,7 @@ from ..scene.model import Scene
 from ..search import kernels
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
-from ..search.paths import InteractionType, Paths, assemble
+from ..search.paths import SPEED_OF_LIGHT, InteractionType, Paths, assemble, path_order
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
@@ -78,8 +78,9 @@ class CoverageOptions:
         Tiles traced at once on threads of this process, when the tiles run in it
         (``workers=1``, or a small map with ``workers=None``): the compiled kernels and
         Embree release the GIL. ``None`` (default): the cores numba uses (1 without
-        numba); ``1``: one tile at a time on the calling thread. The map is the same bit
-        for bit whatever the threads.
+        numba); ``1``: one tile at a time on the calling thread. With the same tiles
+        (``tile_size``), the map is the same bit for bit whatever the threads; the
+        automatic tile size gives each thread two tiles.
     mask_inside : bool
         Mark cells inside solid objects NaN and do not trace them
         (:mod:`wavepaths.coverage.inside`). Turn off for scenes whose closed objects are
@@ -249,13 +250,22 @@ def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power
 
 
 def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int):
-    """(pair, key, a_phased, power) of ``paths``: indices for the per-cell sums and the values."""
+    """(pair, key, a_phased, power) of ``paths``: indices for the per-cell sums and the values,
+    in the canonical order of :func:`wavepaths.search.paths.path_order`, whatever order
+    ``paths`` come in (``assemble(..., sort=False)``): a path's field does not depend on the
+    others' order, and the sums, added in this order, are those of the sorted paths to the
+    last bit, without gathering every path's vertices into that order first."""
+    if not len(paths):
+        z = np.zeros(0, np.int64)
+        return z, z, np.zeros(0, complex), np.zeros(0)
+    lengths = paths.lengths
+    order = path_order(paths.tx_index, paths.rx_index, paths.depth, lengths, paths.interactions, paths.primitive, k)
     pair = paths.tx_index * k + paths.rx_index
     key = path_mechanism(paths) * (m * k) + pair
-    if len(paths):
-        result = compute_fields(scene, paths, config)
-        return pair, key, result.a_phased, np.abs(result.a) ** 2
-    return pair, key, np.zeros(0, complex), np.zeros(0)
+    a = compute_fields(scene, paths, config).a
+    # FieldResult.a_phased, its delays = lengths / c computed once here
+    a_phased = a * np.exp(-2j * np.pi * config.frequency_hz * (lengths / SPEED_OF_LIGHT))
+    return pair[order], key[order], a_phased[order], (np.abs(a) ** 2)[order]
 
 
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
@@ -268,7 +278,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     m, k = len(ctx.tx), len(rx)
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
-    paths = assemble(ctx.tx, rx, batches, dict(stats))
+    paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
     pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
@@ -277,7 +287,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
         # the fields again, with every path: a diffraction term next to a shadow or reflection
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
-        paths = assemble(ctx.tx, rx, batches, dict(stats))
+        paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
         pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at

@@ -219,11 +219,30 @@ class PathBatch:
     vertices: np.ndarray  # (k, d + 2, 3)
 
 
-def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict) -> Paths:
-    """Concatenate path batches of different depths into one padded, sorted :class:`Paths`.
+def path_order(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarray, lengths: np.ndarray,
+               interactions: np.ndarray, primitive: np.ndarray, n_rx: int) -> np.ndarray:
+    """(N,) int64: the canonical order of paths, by (tx, rx, depth, length), then by their
+    interactions and primitives (equal lengths occur in symmetric scenes), so that it does
+    not depend on the order in which the search found them.
 
-    Paths are sorted by (tx, rx, depth, length), then by their interactions and primitives,
-    so that the output order is deterministic and independent of the batches' order.
+    ``np.lexsort`` on one int64 key for (tx, rx, depth) and the lengths; only where two
+    paths tie on both is the whole key (interactions, primitives) sorted, which gives the
+    same order as sorting it everywhere (a stable sort of a total order).
+    """
+    key = (tx_index.astype(np.int64) * max(n_rx, 1) + rx_index) * (interactions.shape[1] + 1) + depth
+    order = np.lexsort((lengths, key))
+    k, ln = key[order], lengths[order]
+    if len(order) > 1 and ((k[1:] == k[:-1]) & (ln[1:] == ln[:-1])).any():
+        order = np.lexsort((*primitive.T[::-1], *interactions.T[::-1], lengths, depth, rx_index, tx_index))
+    return order
+
+
+def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True) -> Paths:
+    """Concatenate path batches of different depths into one padded :class:`Paths`.
+
+    ``sort``: in the order of :func:`path_order`, deterministic and independent of the
+    batches' order. Without it the paths come batch after batch, and ``path_order(...)``
+    of their arrays gives that order (a coverage tile sorts only its per-path values).
     """
     batches = [b for b in batches if len(b.tx_index)]
     dmax = max([b.interactions.shape[1] for b in batches], default=0)
@@ -250,23 +269,15 @@ def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: di
     txi = np.concatenate([b.tx_index for b in batches])
     rxi = np.concatenate([b.rx_index for b in batches])
     vertices = np.concatenate(verts)
-    d = np.diff(vertices, axis=1)
-    lengths = np.sqrt(np.einsum("nsj,nsj->ns", d, d)).sum(axis=1)
-    kinds = np.concatenate([pad(b.interactions, dmax, 0) for b in batches])
+    kinds = np.concatenate([pad(b.interactions, dmax, 0) for b in batches]).astype(np.int8)
     prims = np.concatenate([pad(b.primitive, dmax, -1) for b in batches])
-    # paths of equal length (symmetric scenes) by their interactions: the order does not
-    # depend on the order in which the search found them
-    order = np.lexsort((*prims.T[::-1], *kinds.T[::-1], lengths, depth, rxi, txi))
-    return Paths(
-        tx_positions=tx,
-        rx_positions=rx,
-        tx_index=txi[order],
-        rx_index=rxi[order],
-        depth=depth[order],
-        interactions=kinds[order].astype(np.int8),
-        primitive=prims[order],
-        triangle=np.concatenate([pad(b.triangle, dmax, -1) for b in batches])[order],
-        wedge_faces=np.concatenate([b.wedge_faces for b in batches])[order],
-        vertices=vertices[order],
-        stats=stats,
-    )
+    tri = np.concatenate([pad(b.triangle, dmax, -1) for b in batches])
+    wedge = np.concatenate([b.wedge_faces for b in batches])
+    if sort:
+        d = np.diff(vertices, axis=1)
+        lengths = np.sqrt(np.einsum("nsj,nsj->ns", d, d)).sum(axis=1)
+        order = path_order(txi, rxi, depth, lengths, kinds, prims, len(rx))
+        txi, rxi, depth, kinds, prims, tri, wedge, vertices = (a[order] for a in (txi, rxi, depth, kinds, prims, tri,
+                                                                                  wedge, vertices))
+    return Paths(tx_positions=tx, rx_positions=rx, tx_index=txi, rx_index=rxi, depth=depth, interactions=kinds,
+                 primitive=prims, triangle=tri, wedge_faces=wedge, vertices=vertices, stats=stats)
