@@ -149,3 +149,40 @@ def test_compiled_first_triangle_hints_equal_the_numpy_ones(moved, rng, monkeypa
     finally:
         numba.set_num_threads(old)
     assert got.rays_cast == ref.rays_cast
+
+
+@needs_numba
+@pytest.mark.parametrize("moved", [False, True], ids=["origin", "at_1e6_m_rotated"])
+def test_direct_casts_decide_and_count_like_the_embreex_path(moved, rng):
+    """The occlusion kernel that casts through Embree's C entry point (``direct``, the
+    default with numba) gives the verdicts, ray counts and float64 fallbacks of the
+    compiled set-up around embreex's calls, both directions, also at 1e6 m rotated."""
+    scene = _street_canyon(moved)
+    a, b = _segments(scene, rng, 4000)
+    ref, got = EmbreeRayCaster(scene, direct=False), EmbreeRayCaster(scene)
+    assert ref._direct is None and got._direct is not None
+    for x, y in ((a, b), (b, a)):
+        expect = ref.occluded(x, y)
+        np.testing.assert_array_equal(got.occluded(x, y), expect)
+        assert 0.1 < expect.mean() < 0.9
+    V = np.stack([a, b], axis=1)
+    alive = np.arange(0, len(V), 3)
+    np.testing.assert_array_equal(got.occluded_legs(V, alive, 1, 0), ref.occluded_legs(V, alive, 1, 0))
+    assert got.rays_cast == ref.rays_cast > 0
+    assert got.exact_fallbacks == ref.exact_fallbacks
+
+
+def test_without_embrees_library_the_caster_casts_through_embreex(monkeypatch, rng):
+    """When Embree's C library cannot be found, the default caster keeps the embreex path
+    (same verdicts); asking for ``direct=True`` then is a clear error."""
+    from wavepaths.raycast import embree_c
+
+    scene = load_scene("street_canyon")
+    a, b = _segments(scene, rng, 500)
+    expect = EmbreeRayCaster(scene, compiled=False).occluded(a, b)
+    monkeypatch.setattr(embree_c, "library", lambda: None)
+    caster = EmbreeRayCaster(scene)
+    assert caster._direct is None
+    np.testing.assert_array_equal(caster.occluded(a, b), expect)
+    with pytest.raises(ImportError, match="direct=True"):
+        EmbreeRayCaster(scene, direct=True)

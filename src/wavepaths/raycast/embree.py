@@ -70,9 +70,18 @@ class EmbreeRayCaster:
     around each Embree call (steps 1-3, and the float64 test of each hit) runs as one
     compiled pass per ray (:mod:`wavepaths.raycast._numba`) instead of a dozen numpy
     passes; ``False`` runs the numpy reference. Both decide by the same float64 rule.
+
+    ``direct``: with the compiled kernels, occlusion queries cast through Embree's C entry
+    point from inside the compiled pass (:mod:`wavepaths.raycast.embree_c`,
+    :func:`wavepaths.raycast._numba.occluded_direct`): both half-rays of a segment, their
+    hits and verdicts in one loop, without the GIL. ``None`` (default): when Embree's
+    library is found (embreex ships it); ``False``: through embreex's calls. The same
+    verdicts, ray counts and fallbacks either way. On ``simple_street_canyon``, 96 ns per
+    segment against 144-162 ns (300,000 random segments, one thread).
     """
 
-    def __init__(self, scene: "Scene", batch: int = 1 << 20, compiled: bool | None = None) -> None:
+    def __init__(self, scene: "Scene", batch: int = 1 << 20, compiled: bool | None = None,
+                 direct: bool | None = None) -> None:
         self._center = scene.center.copy()
         self._kernels = _compiled() if compiled is not False else None
         if compiled and self._kernels is None:
@@ -89,6 +98,14 @@ class EmbreeRayCaster:
         self._scene = rtcore_scene.EmbreeScene()
         corners = (scene.vertices[scene.triangles] - self._center).astype(np.float32)
         self._mesh = TriangleMesh(self._scene, corners)
+        # the occlusion queries' own scene, cast into from the compiled kernel (embree_c)
+        self._direct = None
+        if self._kernels is not None and direct is not False:
+            from .embree_c import direct_scene
+
+            self._direct = direct_scene(corners)
+        if direct and self._direct is None:
+            raise ImportError("EmbreeRayCaster(direct=True) needs numba and Embree's C library (embreex ships it)")
         self._rays = 0
         self.exact_fallbacks = 0  # segments Embree could not decide, decided in float64
 
@@ -241,6 +258,8 @@ class EmbreeRayCaster:
     def _halves_core(self, A: np.ndarray, B: np.ndarray, live: np.ndarray) -> np.ndarray:
         """:meth:`_occluded_compiled` from the canonical, recentred ends ``A``, ``B`` and ``live``
         (the segments with length)."""
+        if self._direct is not None:
+            return self._halves_direct(A, B, live)
         K, ex = self._kernels, self._exact
         k = len(A)
         blocked = np.zeros(k, dtype=bool)
@@ -267,6 +286,37 @@ class EmbreeRayCaster:
                 target, far = (A, B) if second else (B, A)
                 uncertain[s3[~(ex.in_plane(target[s3], p3) & ~ex.in_plane(far[s3], p3))]] = True
         rest = np.nonzero(uncertain & ~blocked)[0]
+        if len(rest):
+            with _COUNT_LOCK:
+                self.exact_fallbacks += len(rest)
+            blocked[rest] = ex.blocked(A[rest], B[rest])
+        return blocked
+
+    def _halves_direct(self, A: np.ndarray, B: np.ndarray, live: np.ndarray) -> np.ndarray:
+        """:meth:`_halves_core` in one compiled pass that casts through Embree's C entry point
+        (:func:`wavepaths.raycast._numba.occluded_direct`): the same half-rays, hits and
+        float64 verdicts, without the GIL and without the float32 buffers and the second
+        pass's selection. A crossing next to a face's edge (verdict 3) goes to the numpy
+        ``crosses`` as in :meth:`_halves_core`; if that does not confirm it, both ends lie
+        off the face's plane, so the segment is undecided there too: to the float64 test."""
+        ex, d = self._exact, self._direct
+        blocked = np.zeros(len(A), dtype=bool)
+        sel = np.nonzero(live)[0]
+        if len(sel) == 0:
+            return blocked
+        verdict, face, rays = self._kernels.occluded_direct(
+            A, B, sel, self._lo, self._hi, self._reach_tol, np.uint64(d.intersect), np.uint64(d.scene), ex.normal,
+            ex.offset, ex.tol, ex.inward, ex.inward_offset, ex.edge_tol)
+        with _COUNT_LOCK:
+            self._rays += int(rays)
+        blocked[sel[verdict == 1]] = True
+        rest = sel[verdict == 2]
+        near = np.nonzero(verdict == 3)[0]
+        if len(near):
+            s3, p3 = sel[near], face[near]
+            confirmed = ex.crosses(A[s3], B[s3], p3)
+            blocked[s3[confirmed]] = True
+            rest = np.concatenate([rest, s3[~confirmed]])
         if len(rest):
             with _COUNT_LOCK:
                 self.exact_fallbacks += len(rest)
