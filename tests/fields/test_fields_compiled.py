@@ -126,9 +126,8 @@ def test_compiled_false_never_enters_the_kernels(canyon_paths, monkeypatch):
     def boom(*args):
         raise AssertionError("compiled kernel called")
 
-    monkeypatch.setattr(_numba, "reflect", boom)
-    monkeypatch.setattr(_numba, "diffract", boom)
-    monkeypatch.setattr(_numba, "diffract_parallel", boom)
+    for name in ("reflect", "diffract", "diffract_parallel", "chain_fields", "chain_fields_parallel"):
+        monkeypatch.setattr(_numba, name, boom)
     compute_fields(scene, paths, FieldConfig(F, compiled=False))
     with pytest.raises(AssertionError, match="compiled kernel called"):
         compute_fields(scene, paths, FieldConfig(F, compiled=True))
@@ -172,3 +171,48 @@ def test_parallel_diffraction_kernel_equals_the_serial_one(canyon_paths, monkeyp
     monkeypatch.setattr(compiled, "PARALLEL_MIN_ROWS", 1)
     assert compiled.parallel(10)
     np.testing.assert_array_equal(compute_fields(scene, paths, FieldConfig(F)).a, serial)
+
+
+@pytest.mark.parametrize("antennas", [("iso", "V"), ("tr38901", "VH"), ("dipole", "cross")])
+@pytest.mark.parametrize("reflection_model", ["slab", "half_space"])
+def test_the_one_pass_chain_equals_the_chain_interaction_by_interaction(canyon_paths, antennas, reflection_model):
+    """``path_field_vectors`` runs each path's chain in one compiled pass
+    (``_numba.chain_fields``); the compiled kernels called interaction by interaction over
+    all paths (``_path_field_vectors_numpy`` with ``compiled=True``) give the same field
+    vectors and spreading factors to the last bit, for one- and two-port antennas."""
+    from wavepaths.em.antennas import Antenna
+    from wavepaths.fields.chain import _path_field_vectors_compiled, _path_field_vectors_numpy
+
+    scene, paths = canyon_paths
+    ant = Antenna(*antennas)
+    cfg = FieldConfig(F, reflection_model=reflection_model, tx_antenna=ant, rx_antenna=ant)
+    E0, s0 = _path_field_vectors_numpy(scene, paths, cfg)
+    E1, s1 = _path_field_vectors_compiled(scene, paths, cfg)
+    np.testing.assert_array_equal(E1, E0)
+    np.testing.assert_array_equal(s1, s0)
+
+
+def test_paths_next_to_a_shadow_boundary_go_to_the_numpy_chain_with_their_pair(monkeypatch):
+    """A receiver on the knife edge's incident shadow boundary: its diffraction takes the side
+    of the line of sight, which needs the other paths of its pair. The one-pass kernel leaves
+    that path; the numpy chain computes it among its pair's paths; the result equals the
+    numpy chain's, and the total field stays continuous across the boundary."""
+    from wavepaths.fields import chain
+
+    scene = load_scene("half_plane")
+    tx = np.array([[0.0, -10.0, 3.0]])
+    # the screen is y = 0, z < 0, its edge the x axis: the incident shadow boundary through the
+    # edge point (2, 0, 0) is the ray from tx through it, continued; receivers on it, a hair
+    # either side, and one far from it
+    on = tx[0] + 2.5 * (np.array([2.0, 0.0, 0.0]) - tx[0])
+    rx = np.stack([on, on + [0, 0, 1e-7], on - [0, 0, 1e-7], [7.0, 4.0, -5.0]])
+    paths = trace(scene, tx, rx, TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=0))
+    assert (paths.interactions == 2).any(axis=1).sum() >= 3
+    calls = []
+    real = chain._path_field_vectors_numpy
+    monkeypatch.setattr(chain, "_path_field_vectors_numpy", lambda sc, p, c: calls.append(len(p)) or real(sc, p, c))
+    a = compute_fields(scene, paths, FieldConfig(F)).a
+    assert calls and calls[0] < len(paths)  # only the pairs near the boundary
+    monkeypatch.setattr(chain, "_path_field_vectors_numpy", real)
+    ref = compute_fields(scene, paths, FieldConfig(F, compiled=False)).a
+    assert np.all(_close(a, ref, 1e-11))

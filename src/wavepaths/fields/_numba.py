@@ -176,39 +176,45 @@ def reflect(E, k_in, k_out, normal, material, kinds, etas, thick, slab):
     ``kinds``, ``etas``, ``thick`` (thickness in wavelengths).
     """
     for r in range(E.shape[0]):
-        n0, n1, n2 = normal[r, 0], normal[r, 1], normal[r, 2]
-        ki0, ki1, ki2 = k_in[r, 0], k_in[r, 1], k_in[r, 2]
-        ko0, ko1, ko2 = k_out[r, 0], k_out[r, 1], k_out[r, 2]
-        cos_t = abs(ki0 * n0 + ki1 * n1 + ki2 * n2)
-        f0, f1, f2 = _perp_unit(n0, n1, n2, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
-        s0, s1, s2 = _perp_unit(ki0, ki1, ki2, n0, n1, n2, f0, f1, f2)
-        pi0, pi1, pi2 = s1 * ki2 - s2 * ki1, s2 * ki0 - s0 * ki2, s0 * ki1 - s1 * ki0
-        pr0, pr1, pr2 = s1 * ko2 - s2 * ko1, s2 * ko0 - s0 * ko2, s0 * ko1 - s1 * ko0
-        m = material[r]
-        r_te, r_tm = fresnel(kinds[m], etas[m], thick[m], slab, cos_t)
-        for p in range(E.shape[1]):
-            e0, e1, e2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
-            es = r_te * (e0 * s0 + e1 * s1 + e2 * s2)
-            ep = r_tm * (e0 * pi0 + e1 * pi1 + e2 * pi2)
-            E[r, p, 0] = es * s0 + ep * pr0
-            E[r, p, 1] = es * s1 + ep * pr1
-            E[r, p, 2] = es * s2 + ep * pr2
+        _reflect_core(E, r, k_in[r, 0], k_in[r, 1], k_in[r, 2], k_out[r, 0], k_out[r, 1], k_out[r, 2],
+                      normal[r, 0], normal[r, 1], normal[r, 2], material[r], kinds, etas, thick, slab)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _reflect_core(E, r, ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, m, kinds, etas, thick, slab):
+    """One row of :func:`reflect`: row ``r`` of ``E`` reflected on a face of normal ``n`` and material ``m``."""
+    cos_t = abs(ki0 * n0 + ki1 * n1 + ki2 * n2)
+    f0, f1, f2 = _perp_unit(n0, n1, n2, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
+    s0, s1, s2 = _perp_unit(ki0, ki1, ki2, n0, n1, n2, f0, f1, f2)
+    pi0, pi1, pi2 = s1 * ki2 - s2 * ki1, s2 * ki0 - s0 * ki2, s0 * ki1 - s1 * ki0
+    pr0, pr1, pr2 = s1 * ko2 - s2 * ko1, s2 * ko0 - s0 * ko2, s0 * ko1 - s1 * ko0
+    r_te, r_tm = fresnel(kinds[m], etas[m], thick[m], slab, cos_t)
+    for p in range(E.shape[1]):
+        e0, e1, e2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
+        es = r_te * (e0 * s0 + e1 * s1 + e2 * s2)
+        ep = r_tm * (e0 * pi0 + e1 * pi1 + e2 * pi2)
+        E[r, p, 0] = es * s0 + ep * pr0
+        E[r, p, 1] = es * s1 + ep * pr1
+        E[r, p, 2] = es * s2 + ep * pr2
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
                   kinds, etas, thick, slab):
-    b0 = beta_0[r]
+    _diffract_core(addr, E, r, e[r, 0], e[r, 1], e[r, 2], s_in[r, 0], s_in[r, 1], s_in[r, 2], s_out[r, 0],
+                   s_out[r, 1], s_out[r, 2], x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2], phi[r],
+                   phi_prime[r], beta_0[r], n[r], L[r], k, floor, mat_0[r], mat_n[r], kinds, etas, thick, slab)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, phi, phi_prime, b0, nr, L, k, floor,
+                   m0, mn, kinds, etas, thick, slab):
+    """One row of :func:`diffract`: edge ``e``, directions ``s_in`` = ``a``, ``s_out`` = ``o``,
+    fallback ``f`` (the 0-face direction), the UTD angles, ``L``, the faces' materials."""
     sb = abs(math.sin(b0))
-    nr = n[r]
-    m0, mn = mat_0[r], mat_n[r]
-    r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime[r])))
-    rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi[r])))
-    d_s, d_h = luebbers(addr, phi[r], phi_prime[r], b0, nr, k, L[r], r0_s, r0_h, rn_s, rn_h, floor)
-    e0, e1, e2 = e[r, 0], e[r, 1], e[r, 2]
-    a0, a1, a2 = s_in[r, 0], s_in[r, 1], s_in[r, 2]
-    o0, o1, o2 = s_out[r, 0], s_out[r, 1], s_out[r, 2]
-    f0, f1, f2 = x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2]
+    r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime)))
+    rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi)))
+    d_s, d_h = luebbers(addr, phi, phi_prime, b0, nr, k, L, r0_s, r0_h, rn_s, rn_h, floor)
     pi0, pi1, pi2 = _perp_unit(a0, a1, a2, e0, e1, e2, f0, f1, f2)
     bi0, bi1, bi2 = a1 * pi2 - a2 * pi1, a2 * pi0 - a0 * pi2, a0 * pi1 - a1 * pi0
     po0, po1, po2 = _perp_unit(e0, e1, e2, o0, o1, o2, f0, f1, f2)
@@ -266,28 +272,126 @@ def wedge_geometry(vertices, rows, j, dihedron, face_0, face_n, direction, face_
     beta_0 = np.empty(k)
     n = np.empty(k)
     for r in range(k):
-        i = rows[r]
-        d = dihedron[r]
-        e0, e1, e2 = direction[d, 0], direction[d, 1], direction[d, 2]
-        f0, fn = face_0[r], face_n[r]
-        x0, x1, x2 = face_direction[f0, 0], face_direction[f0, 1], face_direction[f0, 2]
-        y0, y1, y2 = e1 * x2 - e2 * x1, e2 * x0 - e0 * x2, e0 * x1 - e1 * x0
-        p0, p1, p2 = vertices[i, j + 1, 0], vertices[i, j + 1, 1], vertices[i, j + 1, 2]
-        a0, a1, a2 = vertices[i, j, 0] - p0, vertices[i, j, 1] - p1, vertices[i, j, 2] - p2  # prev - p
-        b0, b1, b2 = vertices[i, j + 2, 0] - p0, vertices[i, j + 2, 1] - p1, vertices[i, j + 2, 2] - p2  # nxt - p
-        la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        lb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-        la = la if la > 0.0 else 1.0
-        lb = lb if lb > 0.0 else 1.0
-        si0, si1, si2 = -a0 / la, -a1 / la, -a2 / la  # unit(p - prev)
-        so0, so1, so2 = b0 / lb, b1 / lb, b2 / lb
-        w = _angle(face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2], x0, x1, x2, y0, y1, y2)
-        n[r] = (2.0 * math.pi if w < 1e-9 else w) / math.pi
-        phi_prime[r] = _angle(a0, a1, a2, x0, x1, x2, y0, y1, y2)
-        phi[r] = _angle(b0, b1, b2, x0, x1, x2, y0, y1, y2)
-        c0, c1, c2 = si1 * e2 - si2 * e1, si2 * e0 - si0 * e2, si0 * e1 - si1 * e0
-        beta_0[r] = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), si0 * e0 + si1 * e1 + si2 * e2)
+        (e0, e1, e2, si0, si1, si2, so0, so1, so2, phi[r], phi_prime[r], beta_0[r],
+         n[r]) = _wedge_core(vertices, rows[r], j, dihedron[r], face_0[r], face_n[r], direction, face_direction)
         e[r, 0], e[r, 1], e[r, 2] = e0, e1, e2
         s_in[r, 0], s_in[r, 1], s_in[r, 2] = si0, si1, si2
         s_out[r, 0], s_out[r, 1], s_out[r, 2] = so0, so1, so2
     return e, s_in, s_out, phi, phi_prime, beta_0, n
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _wedge_core(vertices, i, j, d, f0, fn, direction, face_direction):
+    """One row of :func:`wedge_geometry`: ``(e, s_in, s_out`` as 3 scalars each``, phi,
+    phi_prime, beta_0, n)`` of the diffraction at interaction ``j`` of path ``i``."""
+    e0, e1, e2 = direction[d, 0], direction[d, 1], direction[d, 2]
+    x0, x1, x2 = face_direction[f0, 0], face_direction[f0, 1], face_direction[f0, 2]
+    y0, y1, y2 = e1 * x2 - e2 * x1, e2 * x0 - e0 * x2, e0 * x1 - e1 * x0
+    p0, p1, p2 = vertices[i, j + 1, 0], vertices[i, j + 1, 1], vertices[i, j + 1, 2]
+    a0, a1, a2 = vertices[i, j, 0] - p0, vertices[i, j, 1] - p1, vertices[i, j, 2] - p2  # prev - p
+    b0, b1, b2 = vertices[i, j + 2, 0] - p0, vertices[i, j + 2, 1] - p1, vertices[i, j + 2, 2] - p2  # nxt - p
+    la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    lb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+    la = la if la > 0.0 else 1.0
+    lb = lb if lb > 0.0 else 1.0
+    si0, si1, si2 = -a0 / la, -a1 / la, -a2 / la  # unit(p - prev)
+    so0, so1, so2 = b0 / lb, b1 / lb, b2 / lb
+    w = _angle(face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2], x0, x1, x2, y0, y1, y2)
+    nn = (2.0 * math.pi if w < 1e-9 else w) / math.pi
+    pp = _angle(a0, a1, a2, x0, x1, x2, y0, y1, y2)
+    ph = _angle(b0, b1, b2, x0, x1, x2, y0, y1, y2)
+    c0, c1, c2 = si1 * e2 - si2 * e1, si2 * e0 - si0 * e2, si0 * e1 - si1 * e0
+    b = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), si0 * e0 + si1 * e1 + si2 * e2)
+    return e0, e1, e2, si0, si1, si2, so0, so1, so2, ph, pp, b, nn
+
+
+# ---- the whole chain of a path in one pass --------------------------------------------------
+REFLECTION = 1  # wavepaths.search.paths.InteractionType
+DIFFRACTION = 2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
+               poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
+               boundary_eps):
+    # wavepaths.fields.chain.path_field_vectors for row r, with the kernels above; see chain_fields
+    D = interactions.shape[1]
+    total = 0.0
+    for s in range(D + 1):
+        total += seg[r, s]
+    spreading[r] = 1.0 / total
+    for j in range(D):
+        kind = interactions[r, j]
+        if kind == REFLECTION:
+            l0 = seg[r, j] if seg[r, j] > 0 else 1.0
+            l1 = seg[r, j + 1] if seg[r, j + 1] > 0 else 1.0
+            p = primitive[r, j]
+            _reflect_core(E, r, (vertices[r, j + 1, 0] - vertices[r, j, 0]) / l0,
+                          (vertices[r, j + 1, 1] - vertices[r, j, 1]) / l0,
+                          (vertices[r, j + 1, 2] - vertices[r, j, 2]) / l0,
+                          (vertices[r, j + 2, 0] - vertices[r, j + 1, 0]) / l1,
+                          (vertices[r, j + 2, 1] - vertices[r, j + 1, 1]) / l1,
+                          (vertices[r, j + 2, 2] - vertices[r, j + 1, 2]) / l1,
+                          poly_normal[p, 0], poly_normal[p, 1], poly_normal[p, 2], poly_material[p], kinds, etas,
+                          thick, slab)
+        elif kind == DIFFRACTION:
+            f0, fn = wedge_faces[r, 0], wedge_faces[r, 1]
+            (e0, e1, e2, a0, a1, a2, o0, o1, o2, ph, pp, b0,
+             nn) = _wedge_core(vertices, r, j, primitive[r, j], f0, fn, direction, face_direction)
+            s_before = seg[r, 0]
+            for s in range(1, j + 1):
+                s_before += seg[r, s]
+            s_after = 0.0
+            for s in range(j + 1, D + 1):
+                s_after += seg[r, s]
+            # wavepaths.fields.chain._on_boundary_sides: near a shadow or reflection boundary the
+            # term takes the side of the geometrical-optics path, which needs the other paths: left
+            # to the numpy chain, as are angles the UTD refuses
+            margin = max(delta / max(min(s_before, s_after), 1e-300), boundary_eps)
+            if (abs(abs(ph - pp) - math.pi) < margin or abs(ph + pp - math.pi) < margin
+                    or abs(ph + pp - (2 * nn - 1) * math.pi) < margin):
+                deferred[r] = True
+                return
+            if not (math.isfinite(ph) and math.isfinite(pp) and math.isfinite(b0) and 1.0 < nn <= 2.0):
+                deferred[r] = True
+                return
+            sin_b = max(abs(math.sin(b0)), floor)
+            L = s_before * s_after / (s_before + s_after) * sin_b ** 2
+            if not L >= 0.0:
+                deferred[r] = True
+                return
+            _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, face_direction[f0, 0],
+                           face_direction[f0, 1], face_direction[f0, 2], ph, pp, b0, nn, L, k, floor, face_material[f0],
+                           face_material[fn], kinds, etas, thick, slab)
+            spreading[r] = 1.0 / math.sqrt(s_before * s_after * (s_before + s_after))
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_fields(addr, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
+                 poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
+                 boundary_eps):
+    """:func:`wavepaths.fields.chain.path_field_vectors` (model ``"utd"``, no compat) in one pass
+    per path: the reflections (:func:`reflect`), the wedge geometry (:func:`wedge_geometry`)
+    and the diffraction (:func:`diffract`) of each interaction in path order, in place on
+    ``E`` (N, P, 3), the spreading factor into ``spreading`` (N,).
+
+    ``seg`` (N, D + 1) the segment lengths (``Paths.segment_lengths``); ``face_material``
+    the material of each dihedron face. A diffraction within ``delta / min(s, s')``
+    (at least ``boundary_eps``) of a shadow or reflection boundary, or with angles the UTD
+    refuses, marks the path ``deferred`` and leaves its row: the numpy chain takes it.
+    """
+    for r in range(E.shape[0]):
+        _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
+                   poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
+                   boundary_eps)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def chain_fields_parallel(addr, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces,
+                          poly_normal, poly_material, direction, face_direction, face_material, kinds, etas, thick,
+                          slab, k, floor, delta, boundary_eps):
+    """:func:`chain_fields` with the paths on numba's threads (each path is independent)."""
+    for r in numba.prange(E.shape[0]):
+        _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
+                   poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
+                   boundary_eps)

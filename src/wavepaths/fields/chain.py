@@ -278,6 +278,10 @@ def _diffract_compiled(scene: "Scene", cfg: FieldConfig, E, g: dict, L, mat0, ma
 def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[np.ndarray, np.ndarray]:
     """Field vectors at the receiver and the spreading factor of each path.
 
+    With the compiled kernels, model ``"utd"`` and no compat mode, the chain runs as one
+    compiled pass per path (:func:`_path_field_vectors_compiled`); this function's numpy
+    loop over the interactions is its reference.
+
     Returns
     -------
     E : (N, Pt, 3) complex128
@@ -285,6 +289,56 @@ def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[
         (before spreading and the lambda / 4 pi factor).
     spreading : (N,) float64 [1/m]
     """
+    if len(paths) and cfg.model == "utd" and cfg.compat == "none" and _compiled.use_compiled(cfg):
+        return _path_field_vectors_compiled(scene, paths, cfg)
+    return _path_field_vectors_numpy(scene, paths, cfg)
+
+
+def _path_field_vectors_compiled(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`path_field_vectors` with each path's chain in one compiled pass
+    (:func:`wavepaths.fields._numba.chain_fields`: the kernels of the reflections, the wedge
+    geometry and the diffraction, in path order, instead of a gather, a kernel call and a
+    scatter per interaction). A diffraction near a shadow or reflection boundary needs the
+    other paths of its (transmitter, receiver) pair (:func:`_on_boundary_sides`): the kernel
+    leaves such paths, and the numpy chain computes them among those pairs' paths."""
+    from . import _numba
+
+    E = np.ascontiguousarray(antenna_field_vectors(cfg.tx_antenna, paths.departure_directions), dtype=np.complex128)
+    seg = np.ascontiguousarray(paths.segment_lengths)
+    n = len(paths)
+    spreading = np.empty(n)
+    deferred = np.zeros(n, dtype=bool)
+    dih = scene.dihedra
+    kinds = paths.interactions
+    refl = kinds == InteractionType.REFLECTION
+    diffracted = (kinds == InteractionType.DIFFRACTION).any(axis=1)
+    face_material = scene.triangle_material[dih.face_triangle]
+    used = np.concatenate([scene.polygon_material[paths.primitive[refl]],
+                           face_material[paths.wedge_faces[diffracted]].ravel()])
+    tables = _compiled.material_tables(scene, cfg, used)
+    kernel = _numba.chain_fields_parallel if _compiled.parallel(int(diffracted.sum())) else _numba.chain_fields
+    kernel(np.uint64(_compiled.erfcx_address()), E, spreading, deferred, np.ascontiguousarray(paths.vertices, dtype=float),
+           seg, np.ascontiguousarray(kinds), np.ascontiguousarray(paths.primitive, dtype=np.int64),
+           np.ascontiguousarray(paths.wedge_faces, dtype=np.int64), scene.polygon_normal, scene.polygon_material,
+           dih.direction, dih.face_direction, face_material, *tables, cfg.reflection_model == "slab",
+           float(cfg.wavenumber), SIN_BETA_0_FLOOR, 4 * scene.length_tolerance(scene.tolerances.ray_offset),
+           BOUNDARY_EPS)
+    if deferred.any():
+        # the numpy chain for the paths of the pairs concerned (it looks for their
+        # geometrical-optics paths among them), then the deferred rows taken from it
+        n_rx = len(paths.rx_positions)
+        pair = paths.tx_index * n_rx + paths.rx_index
+        among = np.isin(pair, pair[deferred])
+        E_sub, s_sub = _path_field_vectors_numpy(scene, paths.select(among), cfg)
+        rows = np.nonzero(among)[0]
+        take = deferred[rows]
+        E[rows[take]] = E_sub[take]
+        spreading[rows[take]] = s_sub[take]
+    return E, spreading
+
+
+def _path_field_vectors_numpy(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`path_field_vectors` interaction by interaction over all paths (the reference)."""
     seg = paths.segment_lengths  # (N, D + 1)
     dirs = np.diff(paths.vertices, axis=1)
     dirs = dirs / np.where(seg > 0, seg, 1.0)[..., None]
