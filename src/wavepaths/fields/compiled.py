@@ -90,12 +90,21 @@ def material_tables(scene: "Scene", cfg: "FieldConfig", used: np.ndarray) -> tup
     kinds = np.zeros(m, np.int64)
     etas = np.ones(m, np.complex128)
     thick = np.zeros(m, np.float64)
+    # a material's row depends on the material and the frequency only: kept on the scene (as
+    # its dihedra are), keyed by the material object, so a coverage map's tiles compute it once
+    memo = scene.__dict__.setdefault("_material_rows", {})
     for i in np.unique(used).tolist():
         mat = scene.materials[i]
-        kinds[i] = codes.get(mat.kind, _numba.KIND_DIELECTRIC)
-        if kinds[i] == _numba.KIND_DIELECTRIC:
-            etas[i] = complex(relative_permittivity(mat, cfg.frequency_hz))
-            thick[i] = float(mat.thickness_m) / cfg.wavelength
+        key = (id(mat), mat, cfg.frequency_hz)
+        row = memo.get(key)
+        if row is None:
+            kind = codes.get(mat.kind, _numba.KIND_DIELECTRIC)
+            if kind == _numba.KIND_DIELECTRIC:
+                row = (kind, complex(relative_permittivity(mat, cfg.frequency_hz)), float(mat.thickness_m) / cfg.wavelength)
+            else:
+                row = (kind, 1.0 + 0j, 0.0)
+            memo[key] = row
+        kinds[i], etas[i], thick[i] = row
     return kinds, etas, thick
 
 
@@ -112,8 +121,15 @@ def warm_up() -> bool:
     scene = load_scene("street_canyon")
     rx = np.array([[20.0, 0.0, 1.5], [60.0, 5.0, 1.5], [-20.0, 30.0, 1.5]])
     paths = trace(scene, np.array([[-60.0, 0.0, 10.0]]), rx, TraceOptions(max_reflections=1, diffraction=True))
-    for model in ("slab", "half_space"):
-        compute_fields(scene, paths, FieldConfig(reflection_model=model))
+    global PARALLEL_MIN_ROWS
+    saved = PARALLEL_MIN_ROWS
+    try:
+        for rows in (saved, 1):  # the one-pass chain serial, then on numba's threads
+            PARALLEL_MIN_ROWS = rows
+            for model in ("slab", "half_space"):
+                compute_fields(scene, paths, FieldConfig(reflection_model=model))
+    finally:
+        PARALLEL_MIN_ROWS = saved
     # the threaded diffraction kernel, with the argument types _diffract_compiled passes
     from . import _numba
 
