@@ -65,7 +65,9 @@ def as_unit_directions(directions: ArrayLike, name: str = "directions") -> Float
     :class:`WavepathsError` on a bad shape, a non-finite value or a zero vector.
     """
     d = _check_array(directions, name, (3,), np.float64)
-    scale = np.max(np.abs(d), axis=-1, keepdims=True)
+    a = np.abs(d)
+    # the largest component, as three column maxima (np.max over an axis of length 3 is ~10x slower)
+    scale = np.maximum(np.maximum(a[..., 0], a[..., 1]), a[..., 2])[..., None]
     if np.any(scale == 0.0):
         raise WavepathsError(f"`{name}` must be non-zero vectors, got a zero vector")
     d = d / scale  # largest component +-1 first, so tiny vectors do not underflow
