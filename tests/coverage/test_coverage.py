@@ -277,9 +277,10 @@ def test_automatic_tile_size_bounds_the_receiver_images_a_tile_holds(canyon, mon
     ctx0 = build_tx_context(canyon, tx, TraceOptions(max_reflections=2, diffraction=False))
     assert solver.auto_tile_size(ctx0, 100_000, workers=1) == 1024
     assert solver.auto_tile_size(ctx0, 1000, workers=2) == 250
-    # in this process, two tiles per thread
-    assert solver.auto_tile_size(ctx0, 1000, workers=1, threads=2) == 250
-    assert solver.auto_tile_size(ctx0, 1000, workers=1, threads=1) == 1024
+    # workers=None: shrunk for the workers down to THREAD_TILE_MIN only (the map may stay in
+    # this process, on threads, which share the tiles and never shrink them)
+    assert solver.auto_tile_size(ctx0, 1000, workers=None) == 1024
+    assert solver.auto_tile_size(ctx0, 100_000, workers=None) == 1024
     # the automatic size is reported, and the map equals one with explicit tiles
     grid = canyon_grid()
     auto = coverage(canyon, tx, grid, TraceOptions(max_reflections=1), settings=CoverageOptions(workers=1, threads=1))
@@ -359,8 +360,7 @@ def test_a_launched_map_equals_the_exhaustive_map(canyon):
     assert np.nansum(ex.num_paths) > 2000
     np.testing.assert_allclose(la.path_gain_db(), ex.path_gain_db(), rtol=0, atol=1e-9, equal_nan=True)
     ctx = build_tx_context(canyon, np.array([[-60.0, 0, 10]]), launched)
-    assert auto_tile_size(ctx, 20000, 2) == 2048 and auto_tile_size(ctx, 300, 1, threads=1) == 300
-    assert auto_tile_size(ctx, 300, 1, threads=2) == 150  # one tile per thread
+    assert auto_tile_size(ctx, 20000, 2) == 2048 and auto_tile_size(ctx, 300, 1) == 300
     # in square tiles of at most 16 cells (4 x 4 blocks), the same map
     sq = coverage(canyon, [[-60, 0, 10]], grid, launched, settings=CoverageOptions(workers=1, tile_size=16))
     assert sq.metadata["tiles"] >= 8

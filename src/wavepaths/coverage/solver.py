@@ -78,9 +78,10 @@ class CoverageOptions:
         Tiles traced at once on threads of this process, when the tiles run in it
         (``workers=1``, or a small map with ``workers=None``): the compiled kernels and
         Embree release the GIL. ``None`` (default): the cores numba uses (1 without
-        numba); ``1``: one tile at a time on the calling thread. With the same tiles
-        (``tile_size``), the map is the same bit for bit whatever the threads; the
-        automatic tile size gives each thread two tiles.
+        numba); ``1``: one tile at a time on the calling thread. Threads share the tiles
+        the tile size gives (a map of one tile runs on the calling thread, whose compiled
+        kernels may use numba's threads), and the map is the same bit for bit whatever
+        the threads.
     mask_inside : bool
         Mark cells inside solid objects NaN and do not trace them
         (:mod:`wavepaths.coverage.inside`). Turn off for scenes whose closed objects are
@@ -154,7 +155,7 @@ def block_tiles(shape: tuple[int, ...], active: np.ndarray, size: int) -> list[n
     return tiles
 
 
-def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None, threads: int | None = None) -> int:
+def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None) -> int:
     """Cells per tile when :attr:`CoverageOptions.tile_size` is ``None``.
 
     Large tiles amortise the per-call overhead (on ``simple_street_canyon`` at 4 m cells,
@@ -162,24 +163,32 @@ def auto_tile_size(ctx: TxContext, cells: int, workers: int | None = None, threa
     every receiver's image tree up to ``diffraction_reflections``. Estimating a receiver's
     tree by the transmitter's (``ctx.stats``), the tile holds at most
     :data:`TILE_IMAGE_BUDGET` images: ``clamp(budget / images per receiver, 16, 1024)``.
-    With several workers (processes, or with ``workers=1`` the ``threads`` of
-    :class:`CoverageOptions`), tiles are also small enough to give each of them two.
+    With several worker processes (``workers > 1``), tiles are also small enough to give
+    each of them two. Threads of this process share the tiles this gives and never shrink
+    them: a tile's fixed cost holds the GIL (a 1,000-cell map in four tiles on two threads
+    took 1.5-1.7x longer than in one tile on one thread). With ``workers=None`` the map
+    may stay in this process, so the tiles are shrunk for the workers only down to
+    :data:`THREAD_TILE_MIN` cells.
     """
     if ctx.options.launched:
         # launched candidates: no receiver image trees, and every tile scans all the rays
         # traced for the map, so the tiles are as large as the workers allow
-        w = (threads or kernels.threads()) if workers == 1 else (workers or default_workers())
+        w = 1 if workers == 1 else (workers or default_workers())
         return int(np.clip(-(-cells // w), 16, LAUNCHED_TILE_MAX))
     per_rx = 1
     if ctx.options.diffraction:
         per_rx += sum(int(ctx.stats.get(f"images_order_{b}", 0)) for b in range(1, ctx.options.diffraction_reflections + 1))
     size = int(np.clip(TILE_IMAGE_BUDGET // per_rx, 16, 1024))
-    w = workers or default_workers()
-    if w == 1:
-        w = threads or kernels.threads()
-    if w > 1:
-        size = min(size, max(16, -(-cells // (2 * w))))
+    if workers is None or workers > 1:
+        w = workers or default_workers()
+        floor = 16 if workers else THREAD_TILE_MIN
+        size = min(size, max(floor, -(-cells // (2 * w))))
     return size
+
+
+THREAD_TILE_MIN = 1024
+"""With ``workers=None``, the smallest tiles the automatic size gives for the workers (the
+map may stay in this process, on threads, where small tiles cost more than they save)."""
 
 
 @dataclass
@@ -433,7 +442,7 @@ def coverage(
     power_sum = np.full((3, m, n), np.nan)
     num_paths = np.zeros((3, m, n), np.int32)
     stats: Counter = Counter(ctx.stats)
-    size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers, cov.threads)
+    size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers)
     timings["tile_size"] = size
     if opts.launched and isinstance(grid, PlanarGrid):
         tiles = block_tiles(grid.shape, active, size)
