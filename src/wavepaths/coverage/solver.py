@@ -35,7 +35,6 @@ import numpy as np
 from ..errors import WavepathsError
 from ..fields import FieldConfig, compute_fields
 from ..scene.model import Scene
-from ..search import kernels
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import SPEED_OF_LIGHT, InteractionType, Paths, assemble, path_order
