@@ -60,8 +60,8 @@ def test_threads_of_this_process_give_the_same_map(canyon, grid, in_process):
 
 
 def test_a_small_map_stays_in_this_process_a_large_one_goes_to_the_pool(canyon, grid, in_process, monkeypatch):
-    """``workers=None``: the first tile, traced here, predicts the rest; this map's tiles take
-    milliseconds, far below ``POOL_MIN_SECONDS``, so no pool is started. With the threshold
+    """``workers=None``: the second tile, traced here after the first, predicts the rest; this
+    map's tiles take milliseconds, far below ``POOL_MIN_SECONDS``, so no pool is started. With the threshold
     at zero the other tiles go to a pool of the machine's cores: the same map either way."""
     import importlib
 

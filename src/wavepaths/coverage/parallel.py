@@ -12,9 +12,10 @@ settings, received once, plus the working set of the tile it is running. See
 * In this process: the tiles on ``threads`` Python threads (the compiled kernels, Embree
   and numpy's large operations release the GIL; each tile's kernels then run on its own
   thread), results consumed in tile order.
-* Automatic (``workers=None``): the first tile is traced here and timed; if the other
-  tiles would take less than :data:`POOL_MIN_SECONDS` on one thread they are traced here
-  on threads, else in a local pool. A pool's processes start in 2-3 s (imports, the
+* Automatic (``workers=None``): the first tile is traced here, then the second, timed
+  (the first also pays the one-off costs of a process); if the other tiles would take
+  less than :data:`POOL_MIN_SECONDS` on one thread they are traced here on threads, else
+  in a local pool. A pool's processes start in 2-3 s (imports, the
   scene and context unpickled, Embree's BVH rebuilt), which a small map does not win back:
   ``simple_street_canyon``'s 88 x 60-cell R2+D1 map took 2.5-3.6 s through a pool of two
   against 0.32 s on two threads here (0.55 s on one).
@@ -49,8 +50,8 @@ if TYPE_CHECKING:  # pragma: no cover
 OnDone = Callable[[int, TileSums], None]
 
 POOL_MIN_SECONDS = 20.0
-"""With ``workers=None``: the single-thread time of the tiles after the first, as its time
-predicts it, from which they go to a process pool instead of threads of this process. Two
+"""With ``workers=None``: the single-thread time of the tiles left, as the second tile's
+time predicts it, from which they go to a process pool instead of threads of this process. Two
 processes beat two threads by the threads' GIL contention (R2+D1 tiles ran 1.7x faster on
 two threads, GIL-bound R2 tiles not at all) but pay 2-3 s to start: for GIL-bound tiles the
 pool wins from about 6 s of work, for diffraction-heavy tiles from about 30 s."""
@@ -89,10 +90,14 @@ def run_tiles(
     n = min(default_workers(), len(tiles))
     if n <= 1:
         return _run_here(scene, ctx, config, tiles, range(len(tiles)), on_done, n_threads)
-    # the first tile here, timed: it predicts what the others cost
-    t = time.perf_counter()
-    on_done(0, solve_tile(scene, ctx, config, tiles[0]))
-    rest = range(1, len(tiles))
+    # the first tiles here, the last of them timed: it predicts what the others cost (the
+    # first one also pays what a process pays once: kernels loaded from numba's cache, the
+    # scene's caches built)
+    first = 2 if len(tiles) > 2 else 1
+    for i in range(first):
+        t = time.perf_counter()
+        on_done(i, solve_tile(scene, ctx, config, tiles[i]))
+    rest = range(first, len(tiles))
     if (time.perf_counter() - t) * len(rest) < POOL_MIN_SECONDS:
         return _run_here(scene, ctx, config, tiles, rest, on_done, n_threads)
     return _run_pool(min(n, len(rest)), scene, ctx, config, tiles, rest, on_done)

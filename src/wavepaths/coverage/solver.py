@@ -67,9 +67,9 @@ class CoverageOptions:
         by power, ``sum |a|^2`` (smoother maps). Both are kept in the map; this picks
         which one its quantities report by default.
     workers : int or None
-        Local processes. ``1``: in this process. ``None`` (default): the first tile is
-        traced in this process, and its time predicts the rest's; a map whose other tiles
-        would take less than :data:`wavepaths.coverage.parallel.POOL_MIN_SECONDS` on one
+        Local processes. ``1``: in this process. ``None`` (default): the first tiles are
+        traced in this process, and the second one's time predicts the rest's; a map whose
+        other tiles would take less than :data:`wavepaths.coverage.parallel.POOL_MIN_SECONDS` on one
         thread stays in this process (a pool's start-up, 2-3 s, would cost more than it
         saves), a larger one goes to a pool of one process per core. Ignored when a Dask
         ``client`` is given.

@@ -163,35 +163,8 @@ def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_of
     out = np.empty(k, dtype=np.int8)
     for r in range(k):
         i = seg[r]
-        f = prim[r]
-        n0, n1, n2, d = normal[f, 0], normal[f, 1], normal[f, 2], offset[f]
-        a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
-        b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
-        sa = a0 * n0 + a1 * n1 + a2 * n2 - d
-        sb = b0 * n0 + b1 * n1 + b2 * n2 - d
-        tl = tol[f]
-        verdict = -1
-        if (sa > tl and sb < -tl) or (sa < -tl and sb > tl):
-            w = sa / (sa - sb)
-            x0, x1, x2 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)
-            inside = True
-            near = False
-            for e in range(3):
-                dist = inward[f, e, 0] * x0 + inward[f, e, 1] * x1 + inward[f, e, 2] * x2 - inward_offset[f, e]
-                if dist < -edge_tol:
-                    inside = False
-                elif dist <= tl:
-                    near = True
-            if inside:
-                verdict = 3 if near else 1
-        if verdict < 0:
-            # the ray's target end: B for the first half-ray, A for the second. The face holds it
-            # and not the other end: the ray reached the surface the target lies on, this half is
-            # clear. A segment in the face's plane (both ends in it) may graze the face anywhere
-            # in float32, short of a face that blocks it: decided in float64 (2)
-            s_target, s_far = (sa, sb) if second else (sb, sa)
-            verdict = 0 if abs(s_target) <= tl and abs(s_far) > tl and reached[r] else 2
-        out[r] = verdict
+        out[r] = _confirm_one(A[i, 0], A[i, 1], A[i, 2], B[i, 0], B[i, 1], B[i, 2], prim[r], second, normal, offset, tol,
+                              inward, inward_offset, edge_tol, reached[r])
     return out
 
 
@@ -218,7 +191,8 @@ def _call_intersect1(typingctx, fn, scene, rayhit):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward, inward_offset, edge_tol, reached):
-    """:func:`confirm_hits` for one hit (the same float64 rule and verdicts 0-3)."""
+    """The verdict of :func:`confirm_hits` on one hit: face ``f`` met by the half-ray of the
+    segment ``a -> b`` (the second half-ray if ``second``), ``reached`` its far end."""
     n0, n1, n2, d = normal[f, 0], normal[f, 1], normal[f, 2], offset[f]
     sa = a0 * n0 + a1 * n1 + a2 * n2 - d
     sb = b0 * n0 + b1 * n1 + b2 * n2 - d
@@ -236,6 +210,10 @@ def _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward,
                 near = True
         if inside:
             return 3 if near else 1
+    # the ray's target end: B for the first half-ray, A for the second. The face holds it and
+    # not the other end: the ray reached the surface the target lies on, this half is clear.
+    # A segment in the face's plane (both ends in it) may graze the face anywhere in float32,
+    # short of a face that blocks it: decided in float64 (2)
     s_target, s_far = (sa, sb) if second else (sb, sa)
     return 0 if abs(s_target) <= tl and abs(s_far) > tl and reached else 2
 
