@@ -98,6 +98,14 @@ class DirectScene:
 
     def __init__(self, lib: ctypes.CDLL, corners: np.ndarray) -> None:
         corners = np.ascontiguousarray(corners, dtype=np.float32).reshape(-1, 3, 3)
+        # Embree's calls on one object are not thread-safe, and the device is shared: scenes
+        # are built one at a time (casting into a committed scene is thread-safe)
+        with _DEVICE_LOCK:
+            self._build(lib, corners)
+        # the scene goes with this object (also at exit); the device stays for the process
+        weakref.finalize(self, lib.rtcReleaseScene, self.scene)
+
+    def _build(self, lib: ctypes.CDLL, corners: np.ndarray) -> None:
         k = len(corners)
         self.device = _device(lib)
         self.scene = lib.rtcNewScene(self.device)
@@ -120,12 +128,10 @@ class DirectScene:
         if err != RTC_ERROR_NONE:
             raise RuntimeError(f"Embree error {err} while building the scene")
         self.intersect = int(ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value)
-        # the scene goes with this object (also at exit); the device stays for the process
-        weakref.finalize(self, lib.rtcReleaseScene, self.scene)
 
 
 _DEVICE: list = []
-_DEVICE_LOCK = threading.Lock()
+_DEVICE_LOCK = threading.RLock()
 
 
 def _device(lib: ctypes.CDLL) -> int:
