@@ -169,7 +169,7 @@ def test_direct_casts_decide_and_count_like_the_embreex_path(moved, rng):
     alive = np.arange(0, len(V), 3)
     np.testing.assert_array_equal(got.occluded_legs(V, alive, 1, 0), ref.occluded_legs(V, alive, 1, 0))
     assert got.rays_cast == ref.rays_cast > 0
-    assert got.exact_fallbacks == ref.exact_fallbacks
+    assert got.exact_fallbacks == ref.exact_fallbacks > 0  # the undecided verdicts were exercised
 
 
 def test_without_embrees_library_the_caster_casts_through_embreex(monkeypatch, rng):

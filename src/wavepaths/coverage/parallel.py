@@ -14,8 +14,9 @@ settings, received once, plus the working set of the tile it is running. See
   thread), results consumed in tile order.
 * Automatic (``workers=None``): the first tile is traced here, then the second, timed
   (the first also pays the one-off costs of a process); if the other tiles would take
-  less than :data:`POOL_MIN_SECONDS` on one thread they are traced here on threads, else
-  in a local pool. A pool's processes start in 2-3 s (imports, the
+  less than :data:`POOL_MIN_SECONDS` at its pace, or fewer than two are left, they are
+  traced here on threads, else in a local pool. Launched candidates run one tile at a
+  time here (their tube kernels use numba's threads themselves). A pool's processes start in 2-3 s (imports, the
   scene and context unpickled, Embree's BVH rebuilt), which a small map does not win back:
   ``simple_street_canyon``'s 88 x 60-cell R2+D1 map took 2.5-3.6 s through a pool of two
   against 0.32 s on two threads here (0.55 s on one).
@@ -50,8 +51,9 @@ if TYPE_CHECKING:  # pragma: no cover
 OnDone = Callable[[int, TileSums], None]
 
 POOL_MIN_SECONDS = 20.0
-"""With ``workers=None``: the single-thread time of the tiles left, as the second tile's
-time predicts it, from which they go to a process pool instead of threads of this process. Two
+"""With ``workers=None``: the time of the tiles left, at the pace of the second tile (traced
+on the calling thread, whose compiled kernels may use numba's threads), from which they go
+to a process pool instead of threads of this process (two tiles left at least). Two
 processes beat two threads by the threads' GIL contention (R2+D1 tiles ran 1.7x faster on
 two threads, GIL-bound R2 tiles not at all) but pay 2-3 s to start: for GIL-bound tiles the
 pool wins from about 6 s of work, for diffraction-heavy tiles from about 30 s."""
@@ -82,6 +84,10 @@ def run_tiles(
     if client is not None:
         return _run_dask(client, scene, ctx, config, tiles, on_done)
     n_threads = kernels.threads() if threads is None else int(threads)
+    if ctx.options.launched:
+        # the launched tiles' tube kernels run on numba's threads themselves and must not be
+        # entered from two threads at once (numba's workqueue layer aborts the process)
+        n_threads = 1
     if workers is not None:
         n = min(int(workers), len(tiles))
         if n <= 1:
@@ -98,7 +104,7 @@ def run_tiles(
         t = time.perf_counter()
         on_done(i, solve_tile(scene, ctx, config, tiles[i]))
     rest = range(first, len(tiles))
-    if (time.perf_counter() - t) * len(rest) < POOL_MIN_SECONDS:
+    if len(rest) < 2 or (time.perf_counter() - t) * len(rest) < POOL_MIN_SECONDS:
         return _run_here(scene, ctx, config, tiles, rest, on_done, n_threads)
     return _run_pool(min(n, len(rest)), scene, ctx, config, tiles, rest, on_done)
 

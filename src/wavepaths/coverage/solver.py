@@ -69,8 +69,8 @@ class CoverageOptions:
     workers : int or None
         Local processes. ``1``: in this process. ``None`` (default): the first tiles are
         traced in this process, and the second one's time predicts the rest's; a map whose
-        other tiles would take less than :data:`wavepaths.coverage.parallel.POOL_MIN_SECONDS` on one
-        thread stays in this process (a pool's start-up, 2-3 s, would cost more than it
+        other tiles would take less than :data:`wavepaths.coverage.parallel.POOL_MIN_SECONDS` at
+        that pace stays in this process (a pool's start-up, 2-3 s, would cost more than it
         saves), a larger one goes to a pool of one process per core. Ignored when a Dask
         ``client`` is given.
     threads : int or None
@@ -80,7 +80,8 @@ class CoverageOptions:
         numba); ``1``: one tile at a time on the calling thread. Threads share the tiles
         the tile size gives (a map of one tile runs on the calling thread, whose compiled
         kernels may use numba's threads), and the map is the same bit for bit whatever
-        the threads.
+        the threads. Maps with launched candidates run one tile at a time (their tube
+        kernels use numba's threads themselves).
     mask_inside : bool
         Mark cells inside solid objects NaN and do not trace them
         (:mod:`wavepaths.coverage.inside`). Turn off for scenes whose closed objects are

@@ -317,8 +317,11 @@ def _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, pri
     # wavepaths.fields.chain.path_field_vectors for row r, with the kernels above; see chain_fields
     D = interactions.shape[1]
     total = 0.0
-    for s in range(D + 1):
+    for s in range(D + 1):  # left to right, as numpy's sum over fewer than 8 columns
         total += seg[r, s]
+    if not total > 0.0:
+        deferred[r] = True  # a path of length 0: the numpy chain's 1 / 0
+        return
     spreading[r] = 1.0 / total
     for j in range(D):
         kind = interactions[r, j]
@@ -355,9 +358,12 @@ def _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, pri
             if not (math.isfinite(ph) and math.isfinite(pp) and math.isfinite(b0) and 1.0 < nn <= 2.0):
                 deferred[r] = True
                 return
+            if not (s_before > 0.0 and s_after > 0.0):
+                deferred[r] = True  # an edge at an end of the path: the numpy chain's 1 / 0
+                return
             sin_b = max(abs(math.sin(b0)), floor)
             L = s_before * s_after / (s_before + s_after) * sin_b ** 2
-            if not L >= 0.0:
+            if not (L >= 0.0 and math.isfinite(L)):
                 deferred[r] = True
                 return
             _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, face_direction[f0, 0],

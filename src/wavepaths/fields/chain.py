@@ -289,7 +289,10 @@ def path_field_vectors(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[
         (before spreading and the lambda / 4 pi factor).
     spreading : (N,) float64 [1/m]
     """
-    if len(paths) and cfg.model == "utd" and cfg.compat == "none" and _compiled.use_compiled(cfg):
+    # (the kernel adds a path's segment lengths left to right, as numpy's sum does below 8
+    # columns; max_reflections <= 6 keeps paths within 7 segments)
+    if (len(paths) and cfg.model == "utd" and cfg.compat == "none" and paths.max_depth < 7
+            and _compiled.use_compiled(cfg)):
         return _path_field_vectors_compiled(scene, paths, cfg)
     return _path_field_vectors_numpy(scene, paths, cfg)
 

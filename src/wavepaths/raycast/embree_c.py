@@ -48,7 +48,7 @@ def _candidates() -> list[str]:
         import embreex
 
         here = os.path.dirname(os.path.abspath(embreex.__file__))
-        for folder in (os.path.join(here, os.pardir, "embreex.libs"), here):
+        for folder in (os.path.join(here, os.pardir, "embreex.libs"), os.path.join(here, ".dylibs"), here):
             out += sorted(glob.glob(os.path.join(folder, "libembree4*.so*")))
             out += sorted(glob.glob(os.path.join(folder, "libembree4*.dylib"))) + sorted(glob.glob(os.path.join(folder, "embree4*.dll")))
     except ImportError:  # pragma: no cover - embreex is a dependency
@@ -102,13 +102,15 @@ class DirectScene:
         # are built one at a time (casting into a committed scene is thread-safe)
         with _DEVICE_LOCK:
             self._build(lib, corners)
-        # the scene goes with this object (also at exit); the device stays for the process
-        weakref.finalize(self, lib.rtcReleaseScene, self.scene)
 
     def _build(self, lib: ctypes.CDLL, corners: np.ndarray) -> None:
         k = len(corners)
         self.device = _device(lib)
         self.scene = lib.rtcNewScene(self.device)
+        if self.scene:
+            # the scene goes with this object (also at exit, and if the build fails below);
+            # the device stays for the process
+            weakref.finalize(self, lib.rtcReleaseScene, self.scene)
         # robust, as embreex builds its scenes: the same hits, named alike (without it Embree's
         # faster arithmetic named other faces at float32 ties and changed the ray counts)
         lib.rtcSetSceneFlags(self.scene, RTC_SCENE_FLAG_ROBUST)

@@ -216,6 +216,10 @@ def trace(
         raise WavepathsError(f"`threads` must be positive, got {threads}")
     n_threads = int(threads) if threads is not None else (
         kernels.threads() if len(rx) * sum(len(lv) for lv in ctx.levels) >= THREADS_MIN_WORK else 1)
+    if opts.launched:
+        # the launched tiles' tube kernels run on numba's threads themselves and must not be
+        # entered from two threads at once (numba's workqueue layer aborts the process)
+        n_threads = 1
     size = opts.rx_batch
     if n_threads > 1 and len(rx) >= 4 * n_threads:
         # two tiles per thread at least, so that the threads stay busy to the end
