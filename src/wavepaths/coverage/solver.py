@@ -37,7 +37,7 @@ from ..fields import FieldConfig, compute_fields
 from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
-from ..search.paths import SPEED_OF_LIGHT, InteractionType, Paths, assemble, path_order
+from ..search.paths import InteractionType, Paths, assemble, path_order
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
@@ -267,14 +267,12 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     if not len(paths):
         z = np.zeros(0, np.int64)
         return z, z, np.zeros(0, complex), np.zeros(0)
-    lengths = paths.lengths
-    order = path_order(paths.tx_index, paths.rx_index, paths.depth, lengths, paths.interactions, paths.primitive, k)
+    order = path_order(paths.tx_index, paths.rx_index, paths.depth, paths.lengths, paths.interactions, paths.primitive,
+                       k)
     pair = paths.tx_index * k + paths.rx_index
     key = path_mechanism(paths) * (m * k) + pair
-    a = compute_fields(scene, paths, config).a
-    # FieldResult.a_phased, its delays = lengths / c computed once here
-    a_phased = a * np.exp(-2j * np.pi * config.frequency_hz * (lengths / SPEED_OF_LIGHT))
-    return pair[order], key[order], a_phased[order], (np.abs(a) ** 2)[order]
+    result = compute_fields(scene, paths, config)
+    return pair[order], key[order], result.a_phased[order], (np.abs(result.a) ** 2)[order]
 
 
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:

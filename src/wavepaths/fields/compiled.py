@@ -91,11 +91,11 @@ def material_tables(scene: "Scene", cfg: "FieldConfig", used: np.ndarray) -> tup
     etas = np.ones(m, np.complex128)
     thick = np.zeros(m, np.float64)
     # a material's row depends on the material and the frequency only: kept on the scene (as
-    # its dihedra are), keyed by the material object, so a coverage map's tiles compute it once
+    # its dihedra are), keyed by the (frozen) material, so a coverage map's tiles compute it once
     memo = scene.__dict__.setdefault("_material_rows", {})
     for i in np.unique(used).tolist():
         mat = scene.materials[i]
-        key = (id(mat), mat, cfg.frequency_hz)
+        key = (mat, cfg.frequency_hz)
         row = memo.get(key)
         if row is None:
             kind = codes.get(mat.kind, _numba.KIND_DIELECTRIC)

@@ -212,11 +212,7 @@ class EmbreeRayCaster:
             far = b if target is a else a
             clear = self._exact.in_plane(target[h], p) & ~self._exact.in_plane(far[h], p) & reached
             uncertain[h[~clear]] = True
-        rest = np.nonzero(uncertain & ~blocked)[0]
-        if len(rest):
-            self.exact_fallbacks += len(rest)
-            blocked[rest] = self._exact.blocked(a[rest], b[rest])
-        return blocked
+        return self._decide_exact(a, b, np.nonzero(uncertain & ~blocked)[0], blocked)
 
     def occluded_legs(self, V: np.ndarray, alive: np.ndarray, i: int, j: int) -> np.ndarray:
         """:meth:`occluded` of the legs ``V[alive, i] -> V[alive, j]`` of chains ``V`` (k, s, 3).
@@ -285,12 +281,7 @@ class EmbreeRayCaster:
                 s3, p3 = s3[~confirmed], p3[~confirmed]
                 target, far = (A, B) if second else (B, A)
                 uncertain[s3[~(ex.in_plane(target[s3], p3) & ~ex.in_plane(far[s3], p3))]] = True
-        rest = np.nonzero(uncertain & ~blocked)[0]
-        if len(rest):
-            with _COUNT_LOCK:
-                self.exact_fallbacks += len(rest)
-            blocked[rest] = ex.blocked(A[rest], B[rest])
-        return blocked
+        return self._decide_exact(A, B, np.nonzero(uncertain & ~blocked)[0], blocked)
 
     def _halves_direct(self, A: np.ndarray, B: np.ndarray, live: np.ndarray) -> np.ndarray:
         """:meth:`_halves_core` in one compiled pass that casts through Embree's C entry point
@@ -317,10 +308,15 @@ class EmbreeRayCaster:
             confirmed = ex.crosses(A[s3], B[s3], p3)
             blocked[s3[confirmed]] = True
             rest = np.concatenate([rest, s3[~confirmed]])
+        return self._decide_exact(A, B, rest, blocked)
+
+    def _decide_exact(self, A: np.ndarray, B: np.ndarray, rest: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+        """``blocked`` with the segments ``rest`` (that Embree's hits left undecided) decided
+        in float64 against the whole scene, and counted."""
         if len(rest):
             with _COUNT_LOCK:
                 self.exact_fallbacks += len(rest)
-            blocked[rest] = ex.blocked(A[rest], B[rest])
+            blocked[rest] = self._exact.blocked(A[rest], B[rest])
         return blocked
 
     def _nearest_compiled(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
