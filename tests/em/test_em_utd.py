@@ -52,6 +52,21 @@ def test_transition_function_against_fresnel_integral_form() -> None:
     assert np.max(np.abs(transition_function(x) - ref)) < 1e-12
 
 
+def test_transition_function_series_against_the_faddeeva_form_and_the_fresnel_integrals() -> None:
+    # from x = 100 on F comes from its asymptotic series: it must agree with the Faddeeva form
+    # (scipy's erfcx, relative accuracy ~5e-15 there) and with the Fresnel-integral form
+    # (accurate to ~1e-12 up to x ~ 1e3) on both sides of the switch
+    from scipy.special import erfcx
+
+    x = np.concatenate([np.linspace(99.0, 101.0, 201), np.geomspace(100.0, 1e6, 300)])
+    faddeeva = np.exp(0.25j * np.pi) * np.sqrt(np.pi * x) * erfcx(np.exp(0.25j * np.pi) * np.sqrt(x))
+    assert np.max(np.abs(transition_function(x) / faddeeva - 1)) < 2e-14
+    low = x[x <= 1e3]
+    s, c = fresnel(np.sqrt(2 * low / np.pi))
+    ref = np.sqrt(np.pi * low / 2) * np.exp(1j * low) * (1 + 1j - 2j * (c - 1j * s))
+    assert np.max(np.abs(transition_function(low) - ref)) < 1e-12
+
+
 def test_transition_function_limits() -> None:
     assert transition_function(0.0) == 0
     assert transition_function(np.inf) == 1

@@ -41,6 +41,16 @@ def test_erfcx_is_scipys():
     assert np.array_equal(_numba.erfcx_array(np.uint64(compiled.erfcx_address()), z), erfcx(z))
 
 
+def test_compiled_transition_series_is_the_references_polynomial():
+    from wavepaths.em.utd import _f_series, transition_function
+    from wavepaths.fields import _numba
+
+    x = np.concatenate([[100.0, 1e8, 1e300, np.inf], np.geomspace(100.0, 1e12, 1000)])
+    got = np.array([_numba.f_series(v) for v in x])
+    assert np.array_equal(got, _f_series(x))
+    assert np.array_equal(got, transition_function(x))
+
+
 MATERIALS = [
     PEC, ABSORBER, itu_material("concrete"), itu_material("metal"), itu_material("glass", 0.003),
     itu_material("wood", 0.0), Material("near_vacuum", "custom", a=1.0 + 1e-12), Material("thick", "custom", a=5.0,

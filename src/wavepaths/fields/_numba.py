@@ -7,7 +7,6 @@ through its C entry point, whose address is passed in at run time (``erfcx_addr`
 that the cached machine code never holds a stale address.
 """
 
-import cmath
 import math
 
 import llvmlite.ir as ir
@@ -21,10 +20,10 @@ KIND_PEC = 1
 KIND_ABSORBER = 2
 
 _TINY = 1e-200  # wavepaths.em.fresnel._TINY
-_F_ASYMPTOTIC_X = 1e8  # wavepaths.em.utd._F_ASYMPTOTIC_X
 _E_PI4 = complex(math.cos(0.25 * math.pi), math.sin(0.25 * math.pi))
 _E_MPI4 = complex(math.cos(0.25 * math.pi), -math.sin(0.25 * math.pi))
 _SQRT_PI = math.sqrt(math.pi)
+F_SERIES_X = 100.0  # wavepaths.em.utd._F_SERIES_X
 
 
 @intrinsic
@@ -67,30 +66,40 @@ def erfcx_array(addr, z):
 
 @numba.njit(cache=True, nogil=True)
 def _g(addr, x):
-    # wavepaths.em.utd._g: G(x) = F(x)/sqrt(x)
-    if x > _F_ASYMPTOTIC_X:
-        return (1.0 + 0.5j / x - 0.75 / x / x) / math.sqrt(x)
+    # wavepaths.em.utd._g: G(x) = F(x)/sqrt(x), from x = 100 on by F's asymptotic series
+    if x >= F_SERIES_X:
+        return f_series(x) / math.sqrt(x)
     return _E_PI4 * _SQRT_PI * erfcx(addr, _E_PI4 * math.sqrt(x))
 
 
-@numba.njit(cache=True, nogil=True)
-def _sinc(x):
-    if x == 0.0:
-        return 1.0
-    y = math.pi * x
-    return math.sin(y) / y
-
 
 @numba.njit(cache=True, nogil=True)
-def _cot_f(addr, eps, n, kl):
-    # wavepaths.em.utd._cot_f: cot(eps/2n) F(2 kL sin^2(eps/2)), 0 at eps = 0
+def f_series(x):
+    """F(x) for x >= 100 by its asymptotic series: :func:`wavepaths.em.utd._f_series`, the
+    same polynomial."""
+    u = 0.5 / x
+    v = u * u
+    re = 1.0 + v * (-3.0 + v * (105.0 + v * (-10395.0 + v * (2027025.0 + v * -654729075.0))))
+    im = u * (1.0 + v * (-15.0 + v * (945.0 + v * (-135135.0 + v * (34459425.0 + v * -13749310575.0)))))
+    return complex(re, im)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cot_f(addr, eps, n, kl, root_2kl):
+    # wavepaths.em.utd._cot_f: cot(eps/2n) F(2 kL sin^2(eps/2)), 0 at eps = 0. With h = eps/2,
+    # g = h/n and F(x) = sqrt(x) G(x), sqrt(x) = sqrt(2kL) |sin h|: the term is
+    # sign(eps) sqrt(2kL) cos g (sin h / sin g) G(x), where sin h / sin g > 0 (|h| <= pi) is
+    # the reference's n sinc(eps/2pi) / sinc(eps/2pi n), and n where sin g underflows
     if eps == 0.0:
         return 0j
-    ratio = n * _sinc(eps / (2.0 * math.pi)) / _sinc(eps / (2.0 * math.pi * n))
-    s = math.sin(0.5 * eps)
+    h = 0.5 * eps
+    g = h / n
+    s = math.sin(h)
+    sg = math.sin(g)
+    ratio = s / sg if sg != 0.0 else n
     x = 2.0 * kl * s * s
     sgn = 1.0 if eps > 0.0 else -1.0
-    return sgn * math.sqrt(2.0 * kl) * math.cos(eps / (2.0 * n)) * ratio * _g(addr, x)
+    return sgn * root_2kl * math.cos(g) * ratio * _g(addr, x)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -102,20 +111,36 @@ def luebbers(addr, phi, phi_prime, beta_0, n, k, L, r0_s, r0_h, rn_s, rn_h, floo
     bm = phi - phi_prime
     bp = phi + phi_prime
     kl = k * L
+    root_2kl = math.sqrt(2.0 * kl)
     # wavepaths.em.utd._epsilons (np.round is round-half-even, as np.rint)
-    t1 = _cot_f(addr, (math.pi + bm) - two_pi_n * np.rint((bm + math.pi) / two_pi_n), n, kl)
-    t2 = _cot_f(addr, (math.pi - bm) + two_pi_n * np.rint((bm - math.pi) / two_pi_n), n, kl)
-    t3 = _cot_f(addr, (math.pi + bp) - two_pi_n * np.rint((bp + math.pi) / two_pi_n), n, kl)
-    t4 = _cot_f(addr, (math.pi - bp) + two_pi_n * np.rint((bp - math.pi) / two_pi_n), n, kl)
+    t1 = _cot_f(addr, (math.pi + bm) - two_pi_n * np.rint((bm + math.pi) / two_pi_n), n, kl, root_2kl)
+    t2 = _cot_f(addr, (math.pi - bm) + two_pi_n * np.rint((bm - math.pi) / two_pi_n), n, kl, root_2kl)
+    t3 = _cot_f(addr, (math.pi + bp) - two_pi_n * np.rint((bp + math.pi) / two_pi_n), n, kl, root_2kl)
+    t4 = _cot_f(addr, (math.pi - bp) + two_pi_n * np.rint((bp - math.pi) / two_pi_n), n, kl, root_2kl)
     base = t1 + t2
     return pref * (base + r0_s * t4 + rn_s * t3), pref * (base + r0_h * t4 + rn_h * t3)
 
 
-@numba.njit(cache=True, nogil=True)
-def _expm1j(z):
-    # numpy's complex expm1: expm1(x) cos(y) - 2 sin^2(y/2) + j e^x sin(y)
-    a = math.sin(0.5 * z.imag)
-    return complex(math.expm1(z.real) * math.cos(z.imag) - 2.0 * a * a, math.exp(z.real) * math.sin(z.imag))
+@numba.njit(cache=True, nogil=True, inline="always")
+def _csqrt(a, b):
+    # the principal square root of a + jb (numpy's branch: Re >= 0, Im with the sign of b,
+    # signed zeros included), as (re, im)
+    if a == 0.0 and b == 0.0:
+        return 0.0, b
+    m = math.hypot(a, b)
+    if a >= 0.0:
+        t = math.sqrt(0.5 * (m + a))
+        return t, 0.5 * b / t
+    t = math.sqrt(0.5 * (m - a))
+    return 0.5 * abs(b) / t, math.copysign(t, b)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _inv_sq(t):
+    # 1 / t^2 for |t|^2 >= _TINY: (conj(t) / |t|^2)^2
+    a = t.real * t.real + t.imag * t.imag
+    u = complex(t.real / a, -t.imag / a)
+    return u * u
 
 
 @numba.njit(cache=True, nogil=True)
@@ -124,36 +149,60 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
 
     ``kind``: ``KIND_DIELECTRIC`` (``eta`` used), ``KIND_PEC`` or ``KIND_ABSORBER``;
     ``slab``: the single-layer slab of thickness ``thickness_over_lambda`` wavelengths, else
-    the half-space.
+    the half-space. The reference's formulas (P.2040 eqs. 37, 43-44 in the rationalised
+    form of :func:`wavepaths.em.fresnel._half_space_parts`), with its transcendental
+    functions shared: one sine, cosine, exponential and expm1 for the slab's two phase
+    terms, and ``|den|`` of a square as the squared modulus of its root. Equal to the
+    reference to rounding (about 1e-15 relative).
     """
     if kind == KIND_PEC:
         return -1.0 + 0j, 1.0 + 0j
     if kind == KIND_ABSORBER:
         return 0j, 0j
     c = min(abs(c), 1.0)
-    # _half_space_parts
-    root = cmath.sqrt((eta - 1.0) + c * c)
-    den_te = (c + root) ** 2
-    den_tm = (eta * c + root) ** 2
-    if eta == 1.0 or abs(den_te) < _TINY or abs(den_tm) < _TINY:
+    # _half_space_parts, with root = sqrt((eta - 1) + c^2), den = (c + root)^2, (eta c + root)^2
+    w = (eta - 1.0) + c * c
+    rr, ri = _csqrt(w.real, w.imag)
+    root = complex(rr, ri)
+    t_te = c + root
+    t_tm = eta * c + root
+    a_te = t_te.real * t_te.real + t_te.imag * t_te.imag  # |den_te|
+    a_tm = t_tm.real * t_tm.real + t_tm.imag * t_tm.imag
+    if eta == 1.0 or a_te < _TINY or a_tm < _TINY:
         r_te, r_tm, om_te, om_tm = 0j, 0j, 1.0 + 0j, 1.0 + 0j
     else:
-        r_te = (1.0 - eta) / den_te
-        r_tm = (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) / den_tm
-        om_te = 4.0 * c * root / den_te
-        om_tm = 4.0 * eta * c * root / den_tm
+        i_te = _inv_sq(t_te)
+        i_tm = _inv_sq(t_tm)
+        r_te = (1.0 - eta) * i_te
+        r_tm = (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) * i_tm
+        om_te = 4.0 * c * root * i_te
+        om_tm = 4.0 * eta * c * root * i_tm
     if not slab:
         return r_te, r_tm
-    # _slab, eqs. (43)-(44)
+    # _slab, eqs. (43)-(44): q = 2 pi d/lambda root, e1 = e^{-jq}, e2 = e1^2 and
+    # 1 - e2 = -expm1(-2jq) = 2 sin^2(q') - expm1(2q'') cos(2q') + 2j e^{2q''} sin(q') cos(q')
+    # (q = q' + jq''; numpy's complex expm1 with the half-angle sine)
     q = (2.0 * math.pi * thickness_over_lambda) * root
-    e1 = cmath.exp(-1j * q)
+    sq = math.sin(q.real)
+    cq = math.cos(q.real)
+    ex = math.exp(q.imag)
+    e1 = complex(ex * cq, -ex * sq)
     e2 = e1 * e1
-    one_minus_e2 = -_expm1j(-2j * q)
-    den = one_minus_e2 + om_te * e2
-    out_te = r_te if abs(den) < _TINY else r_te * one_minus_e2 / den
-    den = one_minus_e2 + om_tm * e2
-    out_tm = r_tm if abs(den) < _TINY else r_tm * one_minus_e2 / den
-    return out_te, out_tm
+    one_minus_e2 = complex(2.0 * sq * sq - math.expm1(2.0 * q.imag) * ((cq - sq) * (cq + sq)),
+                           2.0 * (ex * ex) * (sq * cq))
+    return _slab_r(r_te, om_te, one_minus_e2, e2), _slab_r(r_tm, om_tm, one_minus_e2, e2)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slab_r(r, om, one_minus_e2, e2):
+    # eq. (43a): r (1 - e2) / (1 - r^2 e2) with 1 - r^2 e2 = (1 - e2) + (1 - r^2) e2; r itself
+    # where |den| < _TINY (the reference's threshold); a plain complex division below 1e-145
+    den = one_minus_e2 + om * e2
+    a = den.real * den.real + den.imag * den.imag
+    if a > 1e-290:
+        num = r * one_minus_e2
+        return complex((num.real * den.real + num.imag * den.imag) / a, (num.imag * den.real - num.real * den.imag) / a)
+    return r if abs(den) < _TINY else r * one_minus_e2 / den
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
