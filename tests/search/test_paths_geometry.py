@@ -308,3 +308,24 @@ def test_unsorted_paths_and_their_path_order_give_the_sorted_paths():
         for name in ("tx_index", "rx_index", "depth", "interactions", "primitive", "triangle", "wedge_faces",
                      "vertices"):
             np.testing.assert_array_equal(getattr(raw, name)[order], getattr(ref, name), err_msg=name)
+
+
+def test_compiled_key_length_order_is_numpys_lexsort():
+    """The counting sort behind :func:`path_order` gives ``np.lexsort((lengths, key))`` and
+    reports ties of key and length exactly when that order holds one: keys with one to
+    hundreds of rows (insertion sort and, above 32, numpy's stable sort), many equal
+    lengths, signed zeros."""
+    pytest.importorskip("numba")
+    from wavepaths.search._numba import key_length_order
+
+    rng = np.random.default_rng(11)
+    for trial in range(240):
+        n, n_keys = int(rng.integers(0, 3000)), int(rng.integers(1, 200))
+        key = rng.integers(0, n_keys, n)
+        lengths = [rng.uniform(0, 100, n), np.round(rng.uniform(0, 5, n), 1),
+                   np.where(rng.random(n) < 0.5, -0.0, 0.0)][trial % 3]
+        order, tie = key_length_order(key, lengths, n_keys)
+        ref = np.lexsort((lengths, key))
+        np.testing.assert_array_equal(order, ref)
+        k, ln = key[ref], lengths[ref]
+        assert tie == bool(n > 1 and ((k[1:] == k[:-1]) & (ln[1:] == ln[:-1])).any())

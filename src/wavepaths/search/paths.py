@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -225,16 +226,36 @@ def path_order(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarray, le
     interactions and primitives (equal lengths occur in symmetric scenes), so that it does
     not depend on the order in which the search found them.
 
-    ``np.lexsort`` on one int64 key for (tx, rx, depth) and the lengths; only where two
-    paths tie on both is the whole key (interactions, primitives) sorted, which gives the
-    same order as sorting it everywhere (a stable sort of a total order).
+    ``np.lexsort`` on one int64 key for (tx, rx, depth) and the lengths (compiled, when the
+    keys are few against the paths: a counting sort on the key, then each key's paths by
+    length, the same permutation); only where two paths tie on both is the whole key
+    (interactions, primitives) sorted, which gives the same order as sorting it everywhere
+    (a stable sort of a total order).
     """
     key = (tx_index.astype(np.int64) * max(n_rx, 1) + rx_index) * (interactions.shape[1] + 1) + depth
-    order = np.lexsort((lengths, key))
-    k, ln = key[order], lengths[order]
-    if len(order) > 1 and ((k[1:] == k[:-1]) & (ln[1:] == ln[:-1])).any():
+    n_keys = int(key.max()) + 1 if len(key) else 0
+    compiled = _key_length_order() if n_keys <= 4 * len(key) + 4096 else None
+    if compiled is not None and not np.isnan(lengths).any():
+        # the same order, by a counting sort on the key (a coverage tile's keys are few)
+        order, tie = compiled(np.ascontiguousarray(key), np.ascontiguousarray(lengths, dtype=np.float64), n_keys)
+    else:
+        order = np.lexsort((lengths, key))
+        k, ln = key[order], lengths[order]
+        tie = len(order) > 1 and bool(((k[1:] == k[:-1]) & (ln[1:] == ln[:-1])).any())
+    if tie:
         order = np.lexsort((*primitive.T[::-1], *interactions.T[::-1], lengths, depth, rx_index, tx_index))
     return order
+
+
+@lru_cache(maxsize=1)
+def _key_length_order():
+    """The compiled ``np.lexsort((lengths, key))`` (:func:`wavepaths.search._numba.key_length_order`),
+    or ``None`` without numba."""
+    try:
+        from ._numba import key_length_order
+    except ImportError:
+        return None
+    return key_length_order
 
 
 def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True) -> Paths:
