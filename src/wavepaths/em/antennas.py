@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Literal, get_args
 
 import numpy as np
@@ -351,8 +352,37 @@ def antenna_field_vectors(
     """
     if not isinstance(antenna, Antenna):
         raise WavepathsError(f"`antenna` must be an Antenna, got {type(antenna).__name__}")
-    d = as_unit_directions(directions)
     tol = _check_pole_tolerance(pole_tolerance)
+    kernel = _compiled_field_vectors()
+    if kernel is not None:
+        a = np.asarray(directions, dtype=np.float64)
+        if a.ndim >= 1 and a.shape[-1] == 3:
+            flat = np.ascontiguousarray(a.reshape(-1, 3))
+            out = np.empty((len(flat), antenna.num_ports, 3), dtype=np.complex128)
+            from ._numba_antennas import MODEL_CODES, PATTERN_CODES
+
+            bad = kernel(flat, np.ascontiguousarray(antenna.rotation), PATTERN_CODES[antenna.pattern],
+                         np.array(antenna.slant_angles), MODEL_CODES[antenna.polarization_model], tol, out)
+            if bad < 0:
+                return out.reshape(a.shape[:-1] + (antenna.num_ports, 3))
+        # a bad shape or direction: the reference raises its error
+    return _antenna_field_vectors_numpy(antenna, directions, tol)
+
+
+@lru_cache(maxsize=1)
+def _compiled_field_vectors():
+    """The compiled :func:`antenna_field_vectors`
+    (:func:`wavepaths.em._numba_antennas.field_vectors`), or ``None`` without numba."""
+    try:
+        from ._numba_antennas import field_vectors
+    except ImportError:
+        return None
+    return field_vectors
+
+
+def _antenna_field_vectors_numpy(antenna: Antenna, directions: ArrayLike, tol: float) -> ComplexArray:
+    """:func:`antenna_field_vectors` in numpy (the reference of the compiled kernel)."""
+    d = as_unit_directions(directions)
     r, (x, _, _), th_l, ph_l, amp = _local_pattern(antenna, d, tol)
     out = np.zeros((x.size, antenna.num_ports, 3), dtype=np.complex128)
     for port, zeta in enumerate(antenna.slant_angles):
