@@ -302,7 +302,7 @@ def diffract_parallel(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_
 def _angle(v0, v1, v2, x0, x1, x2, y0, y1, y2):
     # wavepaths.fields.chain.wedge_geometry's angle(): mod(arctan2(v.y, v.x), 2 pi)
     a = math.atan2(v0 * y0 + v1 * y1 + v2 * y2, v0 * x0 + v1 * x1 + v2 * x2)
-    return a % (2.0 * math.pi) if a < 0.0 else a
+    return a + 2.0 * math.pi if a < 0.0 else a  # Python's a % 2 pi for -2 pi < a < 0, the same addition
 
 
 @numba.njit(cache=True, nogil=True)

@@ -93,7 +93,7 @@ def material_tables(scene: "Scene", cfg: "FieldConfig", used: np.ndarray) -> tup
     # a material's row depends on the material and the frequency only: kept on the scene (as
     # its dihedra are), keyed by the (frozen) material, so a coverage map's tiles compute it once
     memo = scene.__dict__.setdefault("_material_rows", {})
-    for i in np.unique(used).tolist():
+    for i in np.flatnonzero(np.bincount(used, minlength=m)).tolist():  # np.unique's materials, without its sort
         mat = scene.materials[i]
         key = (mat, cfg.frequency_hz)
         row = memo.get(key)

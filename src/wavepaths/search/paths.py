@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -54,6 +54,9 @@ class Paths:
         position repeats, so segments there have zero length.
     stats : dict
         Per-stage counters: candidates considered, rejected by each test, rays cast.
+
+    The arrays are results, not to be changed in place: the derived ``segment_lengths`` and
+    ``lengths`` are computed once from ``vertices`` and kept.
     """
 
     tx_positions: np.ndarray
@@ -76,16 +79,23 @@ class Paths:
     def max_depth(self) -> int:
         return self.interactions.shape[1]
 
-    @property
+    @cached_property
     def segment_lengths(self) -> np.ndarray:
-        """(N, D + 1) float64: length of each segment [m] (0 past the path's end)."""
-        d = np.diff(self.vertices, axis=1)
-        return np.sqrt(np.einsum("nsj,nsj->ns", d, d))
+        """(N, D + 1) float64: length of each segment [m] (0 past the path's end).
 
-    @property
+        Computed once per :class:`Paths` (the search, the sort and the field chain all read
+        it) and returned read-only: copy it to change it."""
+        d = np.diff(self.vertices, axis=1)
+        out = np.sqrt(np.einsum("nsj,nsj->ns", d, d))
+        out.flags.writeable = False
+        return out
+
+    @cached_property
     def lengths(self) -> np.ndarray:
-        """(N,) float64: total path length [m]."""
-        return self.segment_lengths.sum(axis=1)
+        """(N,) float64: total path length [m] (computed once, read-only)."""
+        out = self.segment_lengths.sum(axis=1)
+        out.flags.writeable = False
+        return out
 
     @property
     def delays(self) -> np.ndarray:
