@@ -58,23 +58,23 @@ def occluded_chains(scene: "Scene", vertices: np.ndarray, stats: Counter, exact:
     # hit it, and a face next to it still blocks (no lifted or shortened copies)
     # one leg at a time, each cast only for the chains still clear (compaction), from the
     # receiver back (leg_order)
-    blocked = np.zeros((k, s - 1), dtype=bool)
+    blocked = np.zeros(k, dtype=bool)
     alive = np.nonzero(~degenerate)[0]
     for j in leg_order(s - 1):
         if len(alive) == 0:
             break
         hit = scene.raycaster.occluded_legs(vertices, alive, j, j + 1)
         stats["rays_cast"] += len(alive)
-        blocked[alive[hit], j] = True
+        blocked[alive[hit]] = True
         alive = alive[~hit]
     if exact is not None and exact.any():
         # chains of (tx, rx) pairs that sit on a shadow or reflection boundary: float64 casts
         sel = np.nonzero(exact)[0]
         blocked[sel] = scene.exact_raycaster.occluded(
             vertices[sel, :-1].reshape(-1, 3), vertices[sel, 1:].reshape(-1, 3)
-        ).reshape(len(sel), s - 1)
+        ).reshape(len(sel), s - 1).any(axis=1)
         stats["rays_cast_float64"] += len(sel) * (s - 1)
-    return blocked.any(axis=1) | degenerate
+    return blocked | degenerate
 
 
 def triangle_of(scene: "Scene", polygons: np.ndarray) -> np.ndarray:
