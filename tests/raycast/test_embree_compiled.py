@@ -172,6 +172,34 @@ def test_direct_casts_decide_and_count_like_the_embreex_path(moved, rng):
     assert got.exact_fallbacks == ref.exact_fallbacks > 0  # the undecided verdicts were exercised
 
 
+@needs_numba
+@pytest.mark.parametrize("moved", [False, True], ids=["origin", "at_1e6_m_rotated"])
+def test_direct_first_triangle_hints_equal_the_embreex_ones(moved, rng, monkeypatch):
+    """``first_triangle`` cast from the compiled pass through Embree's C entry point names the
+    triangles of the embreex path, ray for ray, both directions, on one thread and split
+    over several, and counts the same rays; also for segments that leave the scene's box."""
+    import numba
+
+    scene = _street_canyon(moved)
+    a, b = _segments(scene, rng, 4000)
+    far = scene.vertices.mean(axis=0) + 3 * scene.diagonal * rng.normal(size=(500, 3))
+    a, b = np.concatenate([a, far, far]), np.concatenate([b, b[:500], far[::-1]])  # some miss the box
+    ref, got = EmbreeRayCaster(scene, direct=False), EmbreeRayCaster(scene)
+    assert ref._direct is None and got._direct is not None
+    for x, y in ((a, b), (b, a)):
+        expect = ref.first_triangle(x, y)
+        assert 0.1 < (expect >= 0).mean() < 0.95
+        np.testing.assert_array_equal(got.first_triangle(x, y), expect)
+    monkeypatch.setattr(embree, "THREAD_MIN_SEGMENTS", 1000)
+    old = numba.get_num_threads()
+    try:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        np.testing.assert_array_equal(got.first_triangle(a, b), ref.first_triangle(a, b))
+    finally:
+        numba.set_num_threads(old)
+    assert got.rays_cast == ref.rays_cast > 0
+
+
 def test_without_embrees_library_the_caster_casts_through_embreex(monkeypatch, rng):
     """When Embree's C library cannot be found, the default caster keeps the embreex path
     (same verdicts); asking for ``direct=True`` then is a clear error."""

@@ -218,6 +218,65 @@ def _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward,
     return 0 if abs(s_target) <= tl and abs(s_far) > tl and reached else 2
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cast_one(fn, scene, buf, ids, address, start, u, span):
+    """Cast one ray (float32 ``start``, unit ``u``, length ``span``) into the RTCRayHit ``buf``
+    (``ids`` its uint32 view at ``address``) through ``rtcIntersect1``: tnear 0, every mask
+    bit, as embreex's ``run(..., query="INTERSECT")``. Returns the primitive met, -1 if none."""
+    buf[0] = start[0]
+    buf[1] = start[1]
+    buf[2] = start[2]
+    buf[3] = 0.0
+    buf[4] = u[0]
+    buf[5] = u[1]
+    buf[6] = u[2]
+    buf[7] = 0.0
+    buf[8] = span
+    ids[9] = _INVALID_ID  # mask: every bit
+    ids[10] = 0
+    ids[11] = 0
+    for c in range(17, 21):  # primID, geomID, instID[0], instPrimID[0]
+        ids[c] = _INVALID_ID
+    _call_intersect1(fn, scene, address)
+    return -1 if ids[18] == _INVALID_ID else np.int64(ids[17])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rayhit_buffer():
+    """A 16-byte aligned RTCRayHit (96 bytes) inside a fresh float32 array: its float32 and
+    uint32 views (which hold the array) and its address."""
+    raw = np.empty(48, dtype=np.float32)
+    o = ((16 - raw.ctypes.data % 16) % 16) // 4
+    buf = raw[o:o + 24]
+    return buf, buf.view(np.uint32), np.uint64(buf.ctypes.data)
+
+
+@numba.njit(cache=True, nogil=True)
+def nearest_direct(origin, target, lo, hi, fn, scene):
+    """:func:`segment_rays` and Embree's nearest hit in one pass (``rtcIntersect1``, see
+    :func:`occluded_direct`): (k,) int64, the triangle each ray ``origin -> target``
+    (recentred, clipped to the box ``[lo, hi]``, the same float32 rays) meets first, -1 if
+    none or if no part of it lies in the box; and the number of rays cast."""
+    k = origin.shape[0]
+    prim = np.full(k, -1, dtype=np.int64)
+    buf, ids, address = _rayhit_buffer()
+    start = np.empty(3, dtype=np.float32)
+    unit = np.empty(3, dtype=np.float32)
+    rays = 0
+    for r in range(k):
+        o = (origin[r, 0], origin[r, 1], origin[r, 2])
+        t = (target[r, 0], target[r, 1], target[r, 2])
+        u, t0, t_end = _clip_ray(o, t, lo, hi)
+        if not t_end > t0:
+            continue
+        for c in range(3):
+            start[c] = o[c] + t0 * u[c]
+            unit[c] = u[c]
+        prim[r] = _cast_one(fn, scene, buf, ids, address, start, unit, np.float32(t_end - t0))
+        rays += 1
+    return prim, rays
+
+
 @numba.njit(cache=True, nogil=True)
 def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol, inward, inward_offset, edge_tol):
     """The verdicts of :meth:`wavepaths.raycast.embree.EmbreeRayCaster._halves_core` for the
@@ -234,11 +293,9 @@ def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol
     k = sel.shape[0]
     out = np.zeros(k, dtype=np.int8)
     face = np.full(k, -1, dtype=np.int64)
-    raw = np.empty(48, dtype=np.float32)  # one RTCRayHit (96 bytes), 16-byte aligned inside
-    o = ((16 - raw.ctypes.data % 16) % 16) // 4
-    buf = raw[o:o + 24]
-    ids = buf.view(np.uint32)
-    address = np.uint64(buf.ctypes.data)
+    buf, ids, address = _rayhit_buffer()
+    start = np.empty(3, dtype=np.float32)
+    unit = np.empty(3, dtype=np.float32)
     rays = 0
     for r in range(k):
         i = sel[r]
@@ -254,26 +311,14 @@ def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol
             if not t_end > t0:
                 continue  # no part of this half inside the scene's box: nothing to meet
             span = np.float32(t_end - t0)
-            buf[0] = og[0] + t0 * u[0]
-            buf[1] = og[1] + t0 * u[1]
-            buf[2] = og[2] + t0 * u[2]
-            buf[3] = 0.0
-            buf[4] = u[0]
-            buf[5] = u[1]
-            buf[6] = u[2]
-            buf[7] = 0.0
-            buf[8] = span
-            ids[9] = _INVALID_ID  # mask: every bit
-            ids[10] = 0
-            ids[11] = 0
-            for c in range(17, 21):  # primID, geomID, instID[0], instPrimID[0]
-                ids[c] = _INVALID_ID
-            _call_intersect1(fn, scene, address)
+            for c in range(3):
+                start[c] = og[c] + t0 * u[c]
+                unit[c] = u[c]
+            f = _cast_one(fn, scene, buf, ids, address, start, unit, span)
             rays += 1
-            if ids[18] == _INVALID_ID:
+            if f < 0:
                 continue  # nothing on this half
-            reached = buf[8] >= span - reach_tol
-            f = np.int64(ids[17])
+            reached = buf[8] >= span - reach_tol  # the hit's distance, written over tfar
             v = _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward, inward_offset, edge_tol,
                              reached)
             if v != 0:

@@ -321,13 +321,22 @@ class EmbreeRayCaster:
 
     def _nearest_compiled(self, origin: np.ndarray, target: np.ndarray) -> np.ndarray:
         """:meth:`_nearest` with the clipping compiled (:func:`wavepaths.raycast._numba.segment_rays`),
-        on numba's threads for large queries (see :meth:`occluded`)."""
+        on numba's threads for large queries (see :meth:`occluded`); with the direct scene, the
+        rays are cast from the compiled pass too (:func:`wavepaths.raycast._numba.nearest_direct`:
+        the same float32 rays, the same triangles)."""
         k = len(origin)
         n = self._threads(k)
         origin = np.ascontiguousarray(origin, dtype=np.float64)
         target = np.ascontiguousarray(target, dtype=np.float64)
+        d = self._direct
 
         def part(lo: int, hi: int) -> np.ndarray:
+            if d is not None:
+                prim, rays = self._kernels.nearest_direct(origin[lo:hi], target[lo:hi], self._lo, self._hi,
+                                                          np.uint64(d.intersect), np.uint64(d.scene))
+                with _COUNT_LOCK:
+                    self._rays += int(rays)
+                return prim
             rows, start, unit, span = self._kernels.segment_rays(origin[lo:hi], target[lo:hi], self._lo, self._hi)
             prim = np.full(hi - lo, -1, dtype=np.int64)
             for s in range(0, len(rows), self._batch):
