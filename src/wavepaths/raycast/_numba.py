@@ -244,11 +244,13 @@ def _cast_one(fn, scene, buf, ids, address, start, u, span):
 @numba.njit(cache=True, nogil=True, inline="always")
 def _rayhit_buffer():
     """A 16-byte aligned RTCRayHit (96 bytes) inside a fresh float32 array: its float32 and
-    uint32 views (which hold the array) and its address."""
+    uint32 views (which hold the array) and its address; and two float32 3-vectors for a
+    ray's start and direction (:func:`_cast_one`'s arguments)."""
     raw = np.empty(48, dtype=np.float32)
     o = ((16 - raw.ctypes.data % 16) % 16) // 4
     buf = raw[o:o + 24]
-    return buf, buf.view(np.uint32), np.uint64(buf.ctypes.data)
+    return (buf, buf.view(np.uint32), np.uint64(buf.ctypes.data), np.empty(3, dtype=np.float32),
+            np.empty(3, dtype=np.float32))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -259,9 +261,7 @@ def nearest_direct(origin, target, lo, hi, fn, scene):
     none or if no part of it lies in the box; and the number of rays cast."""
     k = origin.shape[0]
     prim = np.full(k, -1, dtype=np.int64)
-    buf, ids, address = _rayhit_buffer()
-    start = np.empty(3, dtype=np.float32)
-    unit = np.empty(3, dtype=np.float32)
+    buf, ids, address, start, unit = _rayhit_buffer()
     rays = 0
     for r in range(k):
         o = (origin[r, 0], origin[r, 1], origin[r, 2])
@@ -293,9 +293,7 @@ def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol
     k = sel.shape[0]
     out = np.zeros(k, dtype=np.int8)
     face = np.full(k, -1, dtype=np.int64)
-    buf, ids, address = _rayhit_buffer()
-    start = np.empty(3, dtype=np.float32)
-    unit = np.empty(3, dtype=np.float32)
+    buf, ids, address, start, unit = _rayhit_buffer()
     rays = 0
     for r in range(k):
         i = sel[r]
