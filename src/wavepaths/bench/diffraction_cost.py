@@ -23,10 +23,10 @@ The two maps of a pair are timed in alternation, ``repeats`` times each (the hea
 this small by default); the headline pair again on one thread beside it
 (``diffraction_cost_ratio_one_thread``): diffraction's work releases the GIL and gains
 from the second core, the map without diffraction hardly does. Beside it, what a path
-costs: the map without diffraction per path it finds (``us_per_path_off``), the time diffraction adds per
-diffracted path (``us_per_diffracted_path``), and how many more paths the map with
-diffraction holds (``paths_ratio``): the time ratio is about the paths ratio times the
-ratio of those per-path costs. And where the headline pair's time goes (``stages``): both
+costs: the map without diffraction per path it finds (``us_per_path_off``), the time
+diffraction adds per diffracted path (``us_per_diffracted_path``), and how many more paths
+the map with diffraction holds (``paths_ratio``): the time ratio is about the paths ratio
+times the ratio of those per-path costs. And where the headline pair's time goes (``stages``): both
 maps once more under cProfile, on one thread (the profiler sees only its own thread),
 split into the stages of :data:`STAGES` (the profiler inflates Python calls: read the
 shares).

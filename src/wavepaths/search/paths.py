@@ -244,7 +244,9 @@ def path_order(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarray, le
     """
     key = (tx_index.astype(np.int64) * max(n_rx, 1) + rx_index) * (interactions.shape[1] + 1) + depth
     n_keys = int(key.max()) + 1 if len(key) else 0
-    compiled = _key_length_order() if n_keys <= 4 * len(key) + 4096 else None
+    # the counting sort indexes by key: only for keys in [0, n_keys) that are few against the paths
+    few = len(key) == 0 or (n_keys <= 4 * len(key) + 4096 and int(key.min()) >= 0)
+    compiled = _key_length_order() if few else None
     if compiled is not None and not np.isnan(lengths).any():
         # the same order, by a counting sort on the key (a coverage tile's keys are few)
         order, tie = compiled(np.ascontiguousarray(key), np.ascontiguousarray(lengths, dtype=np.float64), n_keys)
