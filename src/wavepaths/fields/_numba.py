@@ -72,7 +72,6 @@ def _g(addr, x):
     return _E_PI4 * _SQRT_PI * erfcx(addr, _E_PI4 * math.sqrt(x))
 
 
-
 @numba.njit(cache=True, nogil=True)
 def f_series(x):
     """F(x) for x >= 100 by its asymptotic series: :func:`wavepaths.em.utd._f_series`, the
