@@ -55,6 +55,11 @@ MATERIALS = [
     PEC, ABSORBER, itu_material("concrete"), itu_material("metal"), itu_material("glass", 0.003),
     itu_material("wood", 0.0), Material("near_vacuum", "custom", a=1.0 + 1e-12), Material("thick", "custom", a=5.0,
                                                                                          c=0.1, thickness_m=50.0),
+    # a slab much thinner than the wavelength (q -> 0), a lossless one a quarter wave thick
+    # inside at normal incidence (1 - e2 -> 0 there), a very lossy one
+    Material("thin", "custom", a=5.0, c=0.01, thickness_m=1e-7),
+    Material("resonant", "custom", a=4.0, thickness_m=0.25 * 2.99792458e8 / F),
+    Material("lossy", "custom", a=5.0, c=1e4, thickness_m=0.2),
 ]
 
 
@@ -138,6 +143,9 @@ def test_compiled_false_never_enters_the_kernels(canyon_paths, monkeypatch):
 
     for name in ("reflect", "diffract", "diffract_parallel", "chain_fields", "chain_fields_parallel"):
         monkeypatch.setattr(_numba, name, boom)
+    from wavepaths.em import antennas  # the antennas' compiled loop too
+
+    monkeypatch.setattr(antennas, "_compiled_field_vectors", lambda: boom)
     compute_fields(scene, paths, FieldConfig(F, compiled=False))
     with pytest.raises(AssertionError, match="compiled kernel called"):
         compute_fields(scene, paths, FieldConfig(F, compiled=True))

@@ -329,3 +329,27 @@ def test_compiled_key_length_order_is_numpys_lexsort():
         np.testing.assert_array_equal(order, ref)
         k, ln = key[ref], lengths[ref]
         assert tie == bool(n > 1 and ((k[1:] == k[:-1]) & (ln[1:] == ln[:-1])).any())
+
+
+def test_path_lengths_are_computed_once_read_only_and_not_pickled():
+    """``segment_lengths`` and ``lengths`` are kept after their first reading, read-only (a
+    caller that wants to change them gets an error, not a corrupted cache), equal to the
+    vertices' segment lengths, left out of a pickle and recomputed, read-only, after it."""
+    import pickle
+
+    scene = load_scene("street_canyon")
+    tx, rx = np.array([[-60.0, 0.0, 10.0]]), np.array([[40.0, 3.0, 1.5], [10.0, -4.0, 1.5]])
+    paths = trace(scene, tx, rx, TraceOptions(max_reflections=2, diffraction=True))
+    seg = paths.segment_lengths
+    assert paths.segment_lengths is seg and paths.lengths is paths.lengths
+    np.testing.assert_allclose(seg, np.linalg.norm(np.diff(paths.vertices, axis=1), axis=2), rtol=1e-15, atol=0)
+    np.testing.assert_array_equal(paths.lengths, seg.sum(axis=1))
+    with pytest.raises(ValueError, match="read-only"):
+        paths.lengths[0] = 0.0
+    data = pickle.dumps(paths)
+    assert len(data) < len(pickle.dumps(paths.vertices)) + len(pickle.dumps(paths.primitive)) * 4 + 20_000
+    back = pickle.loads(data)
+    assert "_lengths" not in back.__dict__
+    np.testing.assert_array_equal(back.lengths, paths.lengths)
+    assert not back.lengths.flags.writeable and not back.segment_lengths.flags.writeable
+    assert len(back.select(back.depth > 0).lengths) == int((paths.depth > 0).sum())

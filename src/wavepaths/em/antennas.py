@@ -327,7 +327,7 @@ def antenna_field(
 
 
 def antenna_field_vectors(
-    antenna: Antenna, directions: ArrayLike, *, pole_tolerance: float = 1e-9
+    antenna: Antenna, directions: ArrayLike, *, pole_tolerance: float = 1e-9, compiled: bool | None = None
 ) -> ComplexArray:
     """Field pattern of each port as a global 3-vector, ``C_theta theta_hat + C_phi phi_hat``.
 
@@ -344,6 +344,10 @@ def antenna_field_vectors(
         As :func:`antenna_field`.
     pole_tolerance : float
         As :func:`antenna_field`.
+    compiled : bool, optional
+        Run the compiled loop (``em/_numba_antennas.py``): by default when numba is
+        installed; ``False`` runs the numpy reference (``FieldConfig(compiled=False)``
+        passes it).
 
     Returns
     -------
@@ -353,7 +357,7 @@ def antenna_field_vectors(
     if not isinstance(antenna, Antenna):
         raise WavepathsError(f"`antenna` must be an Antenna, got {type(antenna).__name__}")
     tol = _check_pole_tolerance(pole_tolerance)
-    kernel = _compiled_field_vectors()
+    kernel = _compiled_field_vectors() if compiled is not False else None
     if kernel is not None:
         a = np.asarray(directions, dtype=np.float64)
         if a.ndim >= 1 and a.shape[-1] == 3:

@@ -195,13 +195,14 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
 @numba.njit(cache=True, nogil=True, inline="always")
 def _slab_r(r, om, one_minus_e2, e2):
     # eq. (43a): r (1 - e2) / (1 - r^2 e2) with 1 - r^2 e2 = (1 - e2) + (1 - r^2) e2; r itself
-    # where |den| < _TINY (the reference's threshold); a plain complex division below 1e-145
+    # where |den| < _TINY (the reference's threshold). By the conjugate where |num| and |den|
+    # both exceed 1e-145 (their products stay normal); else numba's complex division
     den = one_minus_e2 + om * e2
+    num = r * one_minus_e2
     a = den.real * den.real + den.imag * den.imag
-    if a > 1e-290:
-        num = r * one_minus_e2
+    if a > 1e-290 and num.real * num.real + num.imag * num.imag > 1e-290:
         return complex((num.real * den.real + num.imag * den.imag) / a, (num.imag * den.real - num.real * den.imag) / a)
-    return r if abs(den) < _TINY else r * one_minus_e2 / den
+    return r if abs(den) < _TINY else num / den
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -306,7 +306,7 @@ def _path_field_vectors_compiled(scene: "Scene", paths: Paths, cfg: FieldConfig)
     leaves such paths, and the numpy chain computes them among those pairs' paths."""
     from . import _numba
 
-    E = np.ascontiguousarray(antenna_field_vectors(cfg.tx_antenna, paths.departure_directions), dtype=np.complex128)
+    E = np.ascontiguousarray(antenna_field_vectors(cfg.tx_antenna, paths.departure_directions, compiled=cfg.compiled), dtype=np.complex128)
     seg = np.ascontiguousarray(paths.segment_lengths)
     n = len(paths)
     spreading = np.empty(n)
@@ -345,7 +345,7 @@ def _path_field_vectors_numpy(scene: "Scene", paths: Paths, cfg: FieldConfig) ->
     seg = paths.segment_lengths  # (N, D + 1)
     dirs = np.diff(paths.vertices, axis=1)
     dirs = dirs / np.where(seg > 0, seg, 1.0)[..., None]
-    E = antenna_field_vectors(cfg.tx_antenna, paths.departure_directions)  # (N, Pt, 3)
+    E = antenna_field_vectors(cfg.tx_antenna, paths.departure_directions, compiled=cfg.compiled)  # (N, Pt, 3)
     total = seg.sum(axis=1)
     spreading = 1.0 / total
     before = np.cumsum(seg, axis=1)  # length up to the end of segment i
@@ -369,7 +369,7 @@ def path_coefficients(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndar
     ``a = (lambda / 4 pi) * spreading * C_rx^H E``; no ``exp(-j 2 pi f tau)`` phase.
     """
     E, spreading = path_field_vectors(scene, paths, cfg)
-    C = antenna_field_vectors(cfg.rx_antenna, -paths.arrival_directions)  # (N, Pr, 3)
+    C = antenna_field_vectors(cfg.rx_antenna, -paths.arrival_directions, compiled=cfg.compiled)  # (N, Pr, 3)
     v = np.einsum("nrj,ntj->nrt", np.conj(C), E)
     return (cfg.wavelength / (4 * np.pi)) * spreading[:, None, None] * v
 

@@ -717,8 +717,8 @@ def degenerate_chains(vertices, weld, plane_tol):
 @numba.njit(cache=True, nogil=True)
 def key_length_order(key, lengths, n_keys):
     """``np.lexsort((lengths, key))`` for ``0 <= key < n_keys``: a stable counting sort on
-    ``key``, then each key's rows by length (insertion sort, stable; numpy's stable sort
-    for a key holding more than 32 rows). Returns ``(order, tie)``: ``tie`` is True when two
+    ``key``, then each key's rows by length (insertion sort, stable; numba's merge sort,
+    stable too, for a key holding more than 32 rows). Returns ``(order, tie)``: ``tie`` is True when two
     rows share both key and length (the caller then sorts on the whole key).
     Lengths must not be NaN (the caller checks)."""
     n = key.size

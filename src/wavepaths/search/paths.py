@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import lru_cache
 
 import numpy as np
 
@@ -79,23 +79,35 @@ class Paths:
     def max_depth(self) -> int:
         return self.interactions.shape[1]
 
-    @cached_property
+    @property
     def segment_lengths(self) -> np.ndarray:
         """(N, D + 1) float64: length of each segment [m] (0 past the path's end).
 
         Computed once per :class:`Paths` (the search, the sort and the field chain all read
         it) and returned read-only: copy it to change it."""
-        d = np.diff(self.vertices, axis=1)
-        out = np.sqrt(np.einsum("nsj,nsj->ns", d, d))
-        out.flags.writeable = False
+        out = self.__dict__.get("_segment_lengths")
+        if out is None:
+            d = np.diff(self.vertices, axis=1)
+            out = np.sqrt(np.einsum("nsj,nsj->ns", d, d))
+            out.flags.writeable = False
+            # kept beside the fields (frozen: not through setattr); two threads that both miss
+            # compute the same array, without a lock
+            self.__dict__["_segment_lengths"] = out
         return out
 
-    @cached_property
+    @property
     def lengths(self) -> np.ndarray:
         """(N,) float64: total path length [m] (computed once, read-only)."""
-        out = self.segment_lengths.sum(axis=1)
-        out.flags.writeable = False
+        out = self.__dict__.get("_lengths")
+        if out is None:
+            out = self.segment_lengths.sum(axis=1)
+            out.flags.writeable = False
+            self.__dict__["_lengths"] = out
         return out
+
+    def __getstate__(self) -> dict:
+        # the derived lengths are not pickled: recomputed, read-only, after unpickling
+        return {k: v for k, v in self.__dict__.items() if k not in ("_segment_lengths", "_lengths")}
 
     @property
     def delays(self) -> np.ndarray:
@@ -249,7 +261,8 @@ def path_order(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarray, le
     compiled = _key_length_order() if few else None
     if compiled is not None and not np.isnan(lengths).any():
         # the same order, by a counting sort on the key (a coverage tile's keys are few)
-        order, tie = compiled(np.ascontiguousarray(key), np.ascontiguousarray(lengths, dtype=np.float64), n_keys)
+        # a writable copy: Paths.lengths is read-only, which numba would compile apart
+        order, tie = compiled(np.ascontiguousarray(key), np.array(lengths, dtype=np.float64), n_keys)
     else:
         order = np.lexsort((lengths, key))
         k, ln = key[order], lengths[order]
