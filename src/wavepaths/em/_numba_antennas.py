@@ -33,10 +33,9 @@ def _amplitude(pattern, zl, rho, x, y, tol):
         u = rho * rho / w
         s = 1.0 if u == 0.0 else math.sin(math.pi * u) / (math.pi * u)  # np.sinc
         return _SQRT_1_643 * s * (math.pi * rho / w)
-    # tr38901: theta, phi of wavepaths.em.polarization._theta_phi
-    r = math.sqrt(x * x + y * y)
-    theta = math.atan2(r, zl)
-    phi = 0.0 if r <= tol else math.atan2(y, x)
+    # tr38901: theta, phi of wavepaths.em.polarization._theta_phi (its rho is this rho)
+    theta = math.atan2(rho, zl)
+    phi = 0.0 if rho <= tol else math.atan2(y, x)
     tv = (theta - math.pi / 2) / _DEG65
     th = phi / _DEG65
     a_v = -min(12.0 * (tv * tv), 30.0)
@@ -86,7 +85,7 @@ def field_vectors(d, R, pattern, slant, model, tol, out):
             cos_phi, sin_phi = xl / rho, yl / rho
             p0, p1, p2 = -sin_phi, cos_phi, 0.0
             t0, t1, t2 = zl * cos_phi, zl * sin_phi, -rho
-        amp = _amplitude(pattern, zl, math.sqrt(xl * xl + yl * yl), xl, yl, tol)
+        amp = _amplitude(pattern, zl, rho, xl, yl, tol)  # the basis's rho, the same expression
         for port in range(slant.shape[0]):
             cz, sz = cos_s[port], sin_s[port]
             if model == 2:
