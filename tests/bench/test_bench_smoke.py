@@ -127,6 +127,14 @@ def test_diffraction_cost_benchmark_reports_per_path_costs():
     diff = [k for k in parts if k.startswith("diffraction") or k.startswith("receivers'")]
     assert len(diff) == 4 and all(st[k]["off_s"] == 0 for k in diff)
     assert sum(st[k]["added_s"] for k in diff) > 0.4 * st["total"]["added_s"]
+    # the floor: trace() on the map's traced cells finds the map's diffracted paths, every leg
+    # of them clear (one leg per segment of each path); the floor lies above 1 (the fields and
+    # casts take time; no timing is compared here)
+    fl = r["floor"]
+    assert fl["diffracted_paths"] == fl["map_diffracted_paths"] == p["diffracted_paths"]
+    assert fl["legs_blocked"] == 0 and fl["legs"] >= 2 * fl["diffracted_paths"]
+    assert 1 < fl["floor_one_thread"] and 1 < fl["floor_threads_ideal"]
+    assert fl["ns_per_path_fields"] > 0 and fl["ns_per_leg_cast"] > 0
 
 
 def test_every_path_query_setting_of_the_tradeoff_sweep_is_accepted_by_trace():

@@ -103,6 +103,75 @@ def stage_times(fn) -> dict:
     return out
 
 
+def diffracted_work(scene, rx: np.ndarray, options) -> tuple:
+    """The headline map's diffracted paths, found by :func:`wavepaths.search.trace` for the map's
+    traced cells ``rx`` (the same search), and their legs.
+
+    Returns ``(paths, a, b)``: the diffracted paths (:class:`~wavepaths.search.paths.Paths`)
+    and the ends (L, 3) [m] of every leg of every one of them, each leg once.
+    """
+    from ..coverage.solver import path_mechanism
+    from ..search import trace
+
+    found = trace(scene, STREET_CANYON_TX, rx, options)
+    paths = found.select(path_mechanism(found) == 2)
+    a, b = [], []
+    for depth in np.unique(paths.depth):
+        v = paths.vertices[paths.depth == depth][:, : depth + 2]
+        a.append(v[:, :-1].reshape(-1, 3))
+        b.append(v[:, 1:].reshape(-1, 3))
+    return paths, np.concatenate(a) if a else np.zeros((0, 3)), np.concatenate(b) if b else np.zeros((0, 3))
+
+
+def cost_floor(scene, grid, cfg, off: dict, on: dict, rounds: int, threads: int, off_threads_s: float,
+               on_threads_s: float) -> dict:
+    """What the headline map with diffraction cannot do without, timed on one thread against the
+    map without diffraction: the fields of its diffracted paths and one occlusion query per leg
+    of each (every leg is clear, so each costs its two half-rays). A search that found those
+    paths at no cost beyond them would give the map with diffraction a cost ratio of
+
+        floor = (t_off + t_fields + t_casts) / t_off        (one thread),
+
+    and, with that work spread ideally over the machine's ``threads`` while the map without
+    diffraction takes ``off_threads_s`` there, ``(t_off + (t_fields + t_casts) / threads) /
+    t_off``. Beside it, the time the search of diffracted paths may take to meet a ratio of 3
+    on those threads (``search_budget_s``) and the time it takes now (``search_s``: the
+    measured ``on_threads_s`` minus the floor's share).
+    """
+    from ..coverage import CoverageOptions, coverage
+    from ..fields import compute_fields
+    from ..search import TraceOptions
+
+    one = CoverageOptions(workers=1, threads=1)
+    saved = kernels.threads()
+    kernels.set_threads(1)
+    try:
+        m = coverage(scene, STREET_CANYON_TX, grid, TraceOptions(**on), fields=cfg, settings=one)
+        rx = grid.cell_centers().reshape(-1, 3)[np.isfinite(m.a_total[0].ravel())]
+        paths, a, b = diffracted_work(scene, rx, TraceOptions(**on))
+        # (the map's cells, the map's search: the same diffracted paths, every leg clear)
+        blocked = int(scene.raycaster.occluded(a, b).sum())
+        compute_fields(scene, paths, cfg)
+        times = interleaved({
+            "off": lambda: coverage(scene, STREET_CANYON_TX, grid, TraceOptions(**off), fields=cfg, settings=one),
+            "fields": lambda: compute_fields(scene, paths, cfg),
+            "casts": lambda: scene.raycaster.occluded(a, b),
+        }, rounds)
+    finally:
+        kernels.set_threads(saved)
+    t_off, t_fields, t_casts = (times[k].median_s for k in ("off", "fields", "casts"))
+    spread = (t_fields + t_casts) / threads
+    return {"diffracted_paths": len(paths), "map_diffracted_paths": int(np.nansum(m.num_paths[2])),
+            "legs": len(a), "legs_blocked": blocked,
+            "off_s": times["off"].as_dict(), "fields_s": times["fields"].as_dict(), "casts_s": times["casts"].as_dict(),
+            "ns_per_path_fields": 1e9 * t_fields / max(len(paths), 1),
+            "ns_per_leg_cast": 1e9 * t_casts / max(len(a), 1),
+            "floor_one_thread": (t_off + t_fields + t_casts) / t_off,
+            "threads": threads, "floor_threads_ideal": (off_threads_s + spread) / off_threads_s,
+            "search_budget_s": max(3.0 * off_threads_s - off_threads_s - spread, 0.0),
+            "search_s": on_threads_s - off_threads_s - spread}
+
+
 def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) -> dict:
     """Benchmark 5."""
     from ..coverage import CoverageOptions, PlanarGrid, coverage
@@ -156,6 +225,11 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
                         "us_per_path_off": 1e6 * t_off / max(off_paths, 1),
                         "us_per_diffracted_path": 1e6 * (t_on - t_off) / max(diffracted, 1),
                         "paths_ratio": all_paths / max(off_paths, 1), "same_geometrical_optics_paths": same_go})
+    # what no search can save: the fields and the casts of the diffracted paths it must find
+    progress("benchmark 5: the floor of the headline pair (fields and casts of the diffracted paths, one thread)")
+    head = results[0]
+    floor = cost_floor(scene, grid, cfg, PAIRS[0][1], PAIRS[0][3], 1 if quick else HEADLINE_ROUNDS, threads,
+                       head["off_s"]["median_s"], head["on_s"]["median_s"])
     # where the headline pair's time goes: the same two maps under cProfile, stage by stage
     off_st, on_st = stage_times(runner(PAIRS[0][1], "off", 1)), stage_times(runner(PAIRS[0][3], "map", 1))
     added = {k: on_st[k] - off_st[k] for k in on_st}
@@ -163,7 +237,8 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
                "share_of_added": added[k] / added["total"] if added["total"] > 0 else None}
               for k in [label for label, _, _ in STAGES] + ["other", "total"]]
     return {"scene": "simple_street_canyon", "grid_shape": list(grid.shape), "cell_size_m": cell,
-            "threads": threads, "pairs": results, "stages": stages, "diffraction_cost_ratio": results[0]["ratio"],
+            "threads": threads, "pairs": results, "stages": stages, "floor": floor,
+            "diffraction_cost_ratio": results[0]["ratio"],
             "headline_pair": "R2 / R2+D1",
             "diffraction_cost_ratio_one_thread": next((r["ratio"] for r in results if r["on"] == "R2+D1"
                                                        and r["threads"] == 1), None),

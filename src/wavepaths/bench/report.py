@@ -100,6 +100,9 @@ def headline(results: dict) -> dict:
         "diffraction_cost_ratio": dc.get("diffraction_cost_ratio"),
         "diffraction_cost_ratio_seed_case": dc.get("seed_case_ratio"),
         "diffraction_cost_ratio_one_thread": dc.get("diffraction_cost_ratio_one_thread"),
+        # what the headline ratio would be on one thread if finding the diffracted paths cost
+        # nothing beyond their fields and casts (diffraction_cost.cost_floor)
+        "diffraction_cost_floor_one_thread": (dc.get("floor") or {}).get("floor_one_thread"),
         "tradeoff_points": points,
     }
     maps_verdict = (to.get("maps") or {}).get("verdict") or {}
@@ -434,6 +437,26 @@ interleaved round by round, and reported as medians over the rounds.</p>
             parts.append(_table([[r["stage"], r["off_s"], r["on_s"], r["added_s"], r["share_of_added"]]
                                  for r in dc["stages"]],
                                 ["stage", "off [s]", "on [s]", "added by diffraction [s]", "share of the added time"]))
+        fl = dc.get("floor")
+        if fl:
+            parts.append(
+                f"<p>The floor of {dc['headline_pair']}: what the map with diffraction cannot do without, timed on "
+                f"one thread against the map without diffraction (median of {fl['off_s']['rounds']} alternating "
+                f"rounds): the fields of its {fl['diffracted_paths']:,} diffracted paths and one occlusion query for "
+                f"each of their {fl['legs']:,} legs. A search that found those paths at no other cost would give "
+                f"the ratio below on one thread, and, with that work spread ideally over {fl['threads']} threads, "
+                f"the ratio beside it. The search's own time on {fl['threads']} threads is what the measured map "
+                "takes beyond that floor; to meet a ratio of 3 it would have to fit in the budget.</p>")
+            parts.append(_table([["map without diffraction, one thread [s]", fl["off_s"]["median_s"]],
+                                 ["fields of the diffracted paths [s]", fl["fields_s"]["median_s"]],
+                                 ["ns per diffracted path (fields)", fl["ns_per_path_fields"]],
+                                 ["casts of their legs [s]", fl["casts_s"]["median_s"]],
+                                 ["ns per leg (casts)", fl["ns_per_leg_cast"]],
+                                 ["floor of the ratio, one thread", fl["floor_one_thread"]],
+                                 [f"floor of the ratio, {fl['threads']} threads (ideal)", fl["floor_threads_ideal"]],
+                                 [f"search now, {fl['threads']} threads [s]", fl["search_s"]],
+                                 [f"search budget for 3x, {fl['threads']} threads [s]", fl["search_budget_s"]]],
+                                ["figure", "value"]))
 
     sk = res.get("skips")
     if sk:
