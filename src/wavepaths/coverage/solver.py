@@ -38,6 +38,7 @@ from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble, path_order
+from ..search import kernels
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
@@ -247,15 +248,36 @@ def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power
     sizes = [len(p) for p in pending]
     pair = np.concatenate([p.tx * k + p.rx for p in pending])
     bound = np.concatenate([np.full(len(p), np.inf) if p.amp is None else p.amp for p in pending]) ** 2 * scale
+    if ctx.options.compiled and kernels.available():
+        from ..search import _numba
+
+        drop = _numba.tolerance_drop(pair.astype(np.int64), bound, np.ascontiguousarray(go_power, dtype=np.float64),
+                                     float(eps), int(len(go_power)))
+    else:
+        drop = _tolerance_drop_numpy(pair, bound, go_power, eps)
+    stats["tolerance_dropped_candidates"] += int(drop.sum())
+    return np.split(~drop, np.cumsum(sizes)[:-1])
+
+
+def _tolerance_drop_numpy(pair: np.ndarray, bound: np.ndarray, go_power: np.ndarray, eps: float) -> np.ndarray:
+    """(k,) bool: the candidates :func:`_tolerance_keep` drops, from their (transmitter, cell)
+    pairs ``pair``, power bounds ``bound`` and the pairs' geometrical-optics powers
+    ``go_power`` (the reference of ``wavepaths.search._numba.tolerance_drop``).
+
+    The candidates in order of pair, then bound (weakest first; ties in their order); one
+    running sum over that order, an infinite bound counted as 0 and never dropped (it ends
+    its pair's drops: it sorts last); a candidate is dropped while the sum since its pair's
+    first candidate stays at most ``eps * go_power[pair]``.
+    """
     order = np.lexsort((bound, pair))
     sp, sb = pair[order], bound[order]
-    cum = np.cumsum(sb)
+    finite = np.isfinite(sb)
+    cum = np.cumsum(np.where(finite, sb, 0.0))
     first = np.searchsorted(sp, sp, side="left")
     within = cum - np.concatenate([[0.0], cum])[first]  # running sum within each pair
     drop = np.zeros(len(pair), dtype=bool)
-    drop[order] = within <= eps * go_power[sp]
-    stats["tolerance_dropped_candidates"] += int(drop.sum())
-    return np.split(~drop, np.cumsum(sizes)[:-1])
+    drop[order] = finite & (within <= eps * go_power[sp])
+    return drop
 
 
 def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int):

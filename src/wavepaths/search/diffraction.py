@@ -417,6 +417,11 @@ def diffraction_tile(
     return out
 
 
+UTD_BOUND_FLOOR = 1e-6
+"""``sin_beta_0_floor`` of :func:`~wavepaths.em.utd.utd_magnitude_bound` in the amplitude bounds
+(its default)."""
+
+
 def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.ndarray, n: np.ndarray,
                                  te: np.ndarray, de: np.ndarray, tr: np.ndarray, dr: np.ndarray,
                                  t: np.ndarray) -> np.ndarray:
@@ -441,7 +446,8 @@ def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.
     with np.errstate(divide="ignore", invalid="ignore"):
         sin_b = np.maximum(de / s_in, SIN_BETA_0_FLOOR)
         L = s_in * s_out / (s_in + s_out) * sin_b**2
-        amp = 1.01 * utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L) / np.sqrt(s_in * s_out * (s_in + s_out))
+        amp = 1.01 * utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L, sin_beta_0_floor=UTD_BOUND_FLOOR) / np.sqrt(
+            s_in * s_out * (s_in + s_out))
     return np.where(np.isfinite(amp), amp, np.inf)
 
 
@@ -585,9 +591,14 @@ def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, sta
     e, d, sec, c = rside.row[rr], rside.dihedron[rr], rside.sector[rr], tside.row[ss]
     amp = None
     if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
-        wedge = ctx.sectors.width[d, sec]
-        amp = _diffraction_amplitude_bound(ctx, rside.phi[rr], tside.phi[ss], wedge / np.pi, tside.t[ss], tside.rho[ss],
-                                           rside.t[rr], rside.rho[rr], t[keep])
+        from ..fields.chain import SIN_BETA_0_FLOOR
+        from .paths import SPEED_OF_LIGHT
+
+        # _diffraction_amplitude_bound (the numpy reference), candidate by candidate
+        amp = _numba.amplitude_bounds(rside.phi[rr], tside.phi[ss], ctx.sectors.width[d, sec] / np.pi, tside.t[ss],
+                                      tside.rho[ss], rside.t[rr], rside.rho[rr], t[keep],
+                                      2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT, SIN_BETA_0_FLOOR,
+                                      UTD_BOUND_FLOOR)
     return _pending_or_batch(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, tag, e, d, sec, c, verts, amp, pending)
 
 

@@ -138,6 +138,13 @@ def warm_up() -> bool:
     one = np.zeros(2, np.int64)  # two images on polygon 0, whose list holds dihedron 0 (column 0)
     receiver_pairs(z3, None, z3, z3, None, None, z3, frame, None, parallel=True,
                    listed=(one, np.array([0, 1]), np.zeros(1, np.int64), np.zeros(1, np.int64)))
+    # the tolerance of coverage maps (TraceOptions.tolerance_db): the candidates' amplitude
+    # bounds and the choice of the dropped ones
+    from . import _numba
+
+    z = np.zeros(2)
+    _numba.amplitude_bounds(z, z, z + 1.5, z, z + 1.0, z, z + 1.0, z, 1.0, 1e-6, 1e-6)
+    _numba.tolerance_drop(one, z.copy(), z.copy(), 0.1, 1)
     return True
 
 

@@ -1,0 +1,98 @@
+"""The compiled work of ``tolerance_db`` (the diffracted candidates' amplitude bounds and the
+choice of those dropped) against its numpy references, and the map it gives either way."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths.coverage import CoverageOptions, PlanarGrid, coverage
+from wavepaths.coverage.solver import _tolerance_drop_numpy
+from wavepaths.fields import FieldConfig
+from wavepaths.scene import load_scene
+from wavepaths.search import TraceOptions, kernels
+
+pytestmark = pytest.mark.skipif(not kernels.available(), reason="needs numba")
+
+
+def _bound_inputs(rng, m: int):
+    """Candidates in reduced coordinates, a tenth of them degenerate: the point at an edge
+    end of the source or receiver (zero distance to the edge and along it), sources on the
+    edge's line, observers on shadow and reflection boundaries."""
+    n = rng.choice([1.0 + 1e-9, 1.25, 1.5, 2.0], m)
+    pp = rng.uniform(0, 1, m) * n * np.pi
+    phi = rng.uniform(0, 1, m) * n * np.pi
+    on = rng.integers(0, 6, m)
+    bnd = np.choose(on % 3, [pp + np.pi, np.pi - pp, (2 * n - 1) * np.pi - pp])
+    phi = np.where((on < 3) & (bnd >= 0) & (bnd <= n * np.pi), bnd, phi)
+    t = rng.uniform(-5, 5, m)
+    te, tr = rng.uniform(-50, 50, m), rng.uniform(-50, 50, m)
+    de, dr = rng.uniform(0, 40, m), rng.uniform(0, 40, m)
+    bad = rng.random(m) < 0.1
+    kind = rng.integers(0, 3, m)
+    te = np.where(bad & (kind == 0), t, te)
+    de = np.where(bad & (kind <= 1), 0.0, de)
+    tr = np.where(bad & (kind == 2), t, tr)
+    dr = np.where(bad & (kind == 2), 0.0, dr)
+    return phi, pp, n, te, de, tr, dr, t
+
+
+def test_amplitude_bounds_kernel_matches_the_numpy_bound():
+    """Candidate by candidate within 1e-12 (their sines and cosines may differ in the last bit),
+    infinite exactly where the reference is not finite."""
+    from types import SimpleNamespace
+
+    from wavepaths.fields.chain import SIN_BETA_0_FLOOR
+    from wavepaths.search import _numba
+    from wavepaths.search.diffraction import UTD_BOUND_FLOOR, _diffraction_amplitude_bound
+    from wavepaths.search.paths import SPEED_OF_LIGHT
+
+    rng = np.random.default_rng(11)
+    args = _bound_inputs(rng, 20000)
+    for f in (3.5e9, 28e9):
+        ctx = SimpleNamespace(options=SimpleNamespace(prune_frequency_hz=f))
+        ref = _diffraction_amplitude_bound(ctx, *args)
+        got = _numba.amplitude_bounds(*args, 2 * np.pi * f / SPEED_OF_LIGHT, SIN_BETA_0_FLOOR, UTD_BOUND_FLOOR)
+        fin = np.isfinite(ref)
+        assert (~fin).sum() > 100 and fin.sum() > 10000  # both kinds are exercised
+        np.testing.assert_array_equal(np.isinf(got), ~fin)
+        np.testing.assert_allclose(got[fin], ref[fin], rtol=1e-12, atol=0)
+
+
+def test_tolerance_drop_kernel_matches_the_numpy_reference():
+    """The same candidates dropped, bit for bit: ties in bound (kept in their order), infinite
+    bounds (never dropped, and not ending the drops of the pairs after them), empty pairs."""
+    from wavepaths.search import _numba
+
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        k, n_pairs = int(rng.integers(1, 3000)), int(rng.integers(1, 400))
+        pair = rng.integers(0, n_pairs, k).astype(np.int64)
+        bound = rng.choice([1e-9, 1e-8, 3e-8], k) * rng.choice([1.0, rng.uniform(0.5, 2)], k)  # ties
+        bound[rng.random(k) < 0.05] = np.inf
+        go = rng.uniform(0, 2e-6, n_pairs)
+        for eps in (10 ** 0.01 - 1, 10 ** 0.1 - 1, 1.0):
+            ref = _tolerance_drop_numpy(pair, bound, go, eps)
+            got = _numba.tolerance_drop(pair, bound, go, eps, n_pairs)
+            np.testing.assert_array_equal(got, ref)
+    # an infinite bound drops nothing itself and does not stop the other pairs' drops
+    pair = np.array([0, 0, 1, 1], np.int64)
+    bound = np.array([np.inf, 1.0, 1.0, 2.0])
+    go = np.array([10.0, 10.0])
+    for drop in (_tolerance_drop_numpy(pair, bound, go, 0.5), _numba.tolerance_drop(pair, bound, go, 0.5, 2)):
+        np.testing.assert_array_equal(drop, [False, True, True, True])
+
+
+def test_a_tolerance_map_is_the_same_with_and_without_the_compiled_kernels():
+    """TraceOptions(compiled=False) runs every numpy reference (the bounds, the drops, the
+    search): the same paths per cell and the same sums within 1e-12."""
+    scene = load_scene("street_canyon")
+    grid = PlanarGrid(center=[-37.3, 2.2], size=[56, 50], cell_size=[7, 5], height=1.5)
+    tx = [[-60, 0, 10], [-20, 4, 6]]
+    settings = CoverageOptions(workers=1, tile_size=32)
+    maps = [coverage(scene, tx, grid, TraceOptions(tolerance_db=0.5, compiled=c), fields=FieldConfig(3.5e9),
+                     settings=settings) for c in (True, False)]
+    assert maps[0].stats["tolerance_dropped_candidates"] == maps[1].stats["tolerance_dropped_candidates"] > 0
+    np.testing.assert_array_equal(maps[0].num_paths, maps[1].num_paths)
+    ok = ~maps[0].inside
+    np.testing.assert_allclose(maps[0].power_sum[..., ok], maps[1].power_sum[..., ok], rtol=1e-12, atol=0)
