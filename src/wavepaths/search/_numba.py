@@ -769,12 +769,12 @@ def amplitude_bounds(phi, phi_prime, n, te, de, tr, dr, t, k, floor, utd_floor):
     for i in range(m):
         s_in = math.hypot(te[i] - t[i], de[i])
         s_out = math.hypot(tr[i] - t[i], dr[i])
-        q = de[i] / s_in if s_in != 0.0 else (math.nan if de[i] == 0.0 else math.copysign(math.inf, de[i]))
+        q = de[i] / s_in if s_in != 0.0 else math.nan  # s_in = 0: de = 0 too, the reference's 0 / 0
         if q != q:
             out[i] = math.inf
             continue
         sin_b = q if q > floor else floor
-        L = s_in * s_out / (s_in + s_out) * sin_b ** 2 if s_in + s_out != 0.0 else math.nan
+        L = s_in * s_out / (s_in + s_out) * sin_b ** 2  # s_in > 0 here
         nn = n[i]
         sb = abs(sin_b)
         sb = sb if sb > utd_floor else utd_floor  # utd_magnitude_bound's sin_beta_0_floor
@@ -801,7 +801,7 @@ def amplitude_bounds(phi, phi_prime, n, te, de, tr, dr, t, k, floor, utd_floor):
 
 @numba.njit(cache=True, nogil=True)
 def tolerance_drop(pair, bound, go_power, eps, n_pairs):
-    # coverage.solver._tolerance_keep_numpy (the reference): the candidates ordered by pair,
+    # coverage.solver._tolerance_drop_numpy (the reference): the candidates ordered by pair,
     # then bound (ties in their order), as np.lexsort((bound, pair)); the same running sum
     # over that order as its np.cumsum (infinite bounds counted as 0, never dropped), each
     # candidate dropped while the sum since its pair's first stays <= eps * go_power[pair].
