@@ -612,12 +612,15 @@ def finish_diffraction(scene: "Scene", ctx: TxContext, pend: PendingDiffraction,
     tag = f"diffraction_{a}r_{b}r"
     rx_i = pend.rx
     d, c, f0, fn, verts, post_polys = pend.rest
-    if keep is not None:
-        rx_i, d, c, f0, fn, verts, post_polys = (x[keep] for x in (rx_i, d, c, f0, fn, verts, post_polys))
+    rows = None if keep is None else np.nonzero(keep)[0]
+    if rows is not None:
+        verts = verts[rows]
     blocked = occluded_chains(scene, verts, stats)
     stats[f"{tag}_rejected_occluded"] += int(blocked.sum())
-    keep = ~blocked
-    rx_i, d, c, f0, fn, verts, post_polys = (x[keep] for x in (rx_i, d, c, f0, fn, verts, post_polys))
+    clear = np.nonzero(~blocked)[0]
+    rows = clear if rows is None else rows[clear]  # the candidates kept and clear: one gather each
+    verts = verts[clear]
+    rx_i, d, c, f0, fn, post_polys = (x[rows] for x in (rx_i, d, c, f0, fn, post_polys))
     k = len(d)
     kinds = np.full((k, a + 1 + b), InteractionType.REFLECTION, np.int8)
     kinds[:, a] = InteractionType.DIFFRACTION
