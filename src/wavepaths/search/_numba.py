@@ -714,13 +714,10 @@ def degenerate_chains(vertices, weld, plane_tol):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
-def key_length_order(key, lengths, n_keys):
-    """``np.lexsort((lengths, key))`` for ``0 <= key < n_keys``: a stable counting sort on
-    ``key``, then each key's rows by length (insertion sort, stable; numba's merge sort,
-    stable too, for a key holding more than 32 rows). Returns ``(order, tie)``: ``tie`` is True when two
-    rows share both key and length (the caller then sorts on the whole key).
-    Lengths must not be NaN (the caller checks)."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _counting_sort(key, n_keys):
+    """A stable counting sort of ``key`` (``0 <= key < n_keys``): ``(start, order)``, the rows of
+    key ``b`` being ``order[start[b]:start[b + 1]]`` in their original order."""
     n = key.size
     start = np.zeros(n_keys + 1, np.int64)
     for i in range(n):
@@ -733,6 +730,17 @@ def key_length_order(key, lengths, n_keys):
         b = key[i]
         order[fill[b]] = i
         fill[b] += 1
+    return start, order
+
+
+@numba.njit(cache=True, nogil=True)
+def key_length_order(key, lengths, n_keys):
+    """``np.lexsort((lengths, key))`` for ``0 <= key < n_keys``: a stable counting sort on
+    ``key``, then each key's rows by length (insertion sort, stable; numba's merge sort,
+    stable too, for a key holding more than 32 rows). Returns ``(order, tie)``: ``tie`` is True when two
+    rows share both key and length (the caller then sorts on the whole key).
+    Lengths must not be NaN (the caller checks)."""
+    start, order = _counting_sort(key, n_keys)
     tie = False
     for b in range(n_keys):
         lo, hi = start[b], start[b + 1]
@@ -807,17 +815,7 @@ def tolerance_drop(pair, bound, go_power, eps, n_pairs):
     # candidate dropped while the sum since its pair's first stays <= eps * go_power[pair].
     # The pairs are grouped by a counting sort. Returns (k,) bool, True: dropped
     k = pair.shape[0]
-    start = np.zeros(n_pairs + 1, np.int64)
-    for i in range(k):
-        start[pair[i] + 1] += 1
-    for p in range(n_pairs):
-        start[p + 1] += start[p]
-    fill = start[:-1].copy()
-    members = np.empty(k, np.int64)
-    for i in range(k):
-        p = pair[i]
-        members[fill[p]] = i
-        fill[p] += 1
+    start, members = _counting_sort(pair, n_pairs)
     drop = np.zeros(k, np.bool_)
     cum = 0.0
     for p in range(n_pairs):
