@@ -25,9 +25,12 @@ the visibility windows (:mod:`wavepaths.search._numba_windows`,
 :mod:`wavepaths.search.visibility`), the join of the two sides with the closed-form
 point (``_numba.joined_candidates``, :mod:`wavepaths.search.diffraction`), the Keller-cone
 culling of the sources per chunk of receivers (``_numba.keller_cone_keep``, same module),
-the back-traces of the image method (``_numba.backtrace``, :mod:`wavepaths.search.images`)
-and the proof that a mirror is hidden from a source (``_numba_mirrors.behind``,
-:mod:`wavepaths.search.mirror_visibility`).
+the back-traces of the image method (``_numba.backtrace``, :mod:`wavepaths.search.images`),
+the proof that a mirror is hidden from a source (``_numba_mirrors.behind``,
+:mod:`wavepaths.search.mirror_visibility`), and the tolerance of coverage maps: the
+diffracted candidates' amplitude bounds (``_numba.amplitude_bounds``,
+:mod:`wavepaths.search.diffraction`) and the choice of those dropped
+(``_numba.tolerance_drop``, :mod:`wavepaths.coverage.solver`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
 ``TraceOptions(compiled=False)``, the numpy reference runs and finds the same paths.
