@@ -444,8 +444,8 @@ interleaved round by round, and reported as medians over the rounds.</p>
                 f"one thread against the map without diffraction (median of {fl['off_s']['rounds']} alternating "
                 f"rounds): the fields of its {fl['diffracted_paths']:,} diffracted paths and one occlusion query for "
                 f"each of their {fl['legs']:,} legs. A search that found those paths at no other cost would give "
-                f"the ratio below on one thread, and, with that work spread ideally over {fl['threads']} threads, "
-                f"the ratio beside it. The search's own time on {fl['threads']} threads is what the measured map "
+                f"the one-thread floor below, and, with that work spread ideally over {fl['threads']} threads, "
+                f"the ideal floor after it. The search's own time on {fl['threads']} threads is what the measured map "
                 "takes beyond that floor; to meet a ratio of 3 it would have to fit in the budget.</p>")
             parts.append(_table([["map without diffraction, one thread [s]", fl["off_s"]["median_s"]],
                                  ["fields of the diffracted paths [s]", fl["fields_s"]["median_s"]],
