@@ -42,7 +42,7 @@ def test_compiled_and_numpy_embree_casters_decide_every_segment_alike(moved, rng
     canyon, also with the scene moved to 1e6 m and rotated (float32 recentring)."""
     scene = _street_canyon(moved)
     a, b = _segments(scene, rng, 4000)
-    ref, got = EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True)
+    ref, got = EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True, bvh=False)
     for x, y in ((a, b), (b, a)):
         expect = ref.occluded(x, y)
         np.testing.assert_array_equal(got.occluded(x, y), expect)
@@ -65,7 +65,7 @@ def test_legs_read_from_the_chains_decide_like_the_gathered_segments(rng):
     V = np.stack([a[:n], b[:n], a[::-1][:n]], axis=1).reshape(-1, 3, 3)  # chains of three points, two legs
     alive = np.sort(rng.choice(len(V), len(V) // 2, replace=False))
     for i, j in ((0, 1), (2, 1), (1, 2)):
-        gathered, legs = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
+        gathered, legs = EmbreeRayCaster(scene, bvh=False), EmbreeRayCaster(scene, bvh=False)
         expect = gathered.occluded(V[alive, i], V[alive, j])
         np.testing.assert_array_equal(legs.occluded_legs(V, alive, i, j), expect)
         assert legs.rays_cast == gathered.rays_cast
@@ -95,8 +95,8 @@ def test_without_numba_the_default_caster_runs_the_numpy_reference(monkeypatch, 
     expect = EmbreeRayCaster(scene, compiled=False).occluded(a, b)
     monkeypatch.setattr(embree, "_compiled", lambda: None)
     with pytest.raises(ImportError, match="numba"):
-        EmbreeRayCaster(scene, compiled=True)
-    caster = EmbreeRayCaster(scene)
+        EmbreeRayCaster(scene, compiled=True, bvh=False)
+    caster = EmbreeRayCaster(scene, bvh=False)
     assert caster._kernels is None
     np.testing.assert_array_equal(caster.occluded(a, b), expect)
 
@@ -110,7 +110,7 @@ def test_threaded_occlusion_decides_and_counts_like_one_thread(monkeypatch, rng)
     scene = load_scene("street_canyon")
     a, b = _segments(scene, rng, 4000)
     monkeypatch.setattr(embree, "THREAD_MIN_SEGMENTS", 1000)  # 12,050 segments: several slices
-    one, many = EmbreeRayCaster(scene), EmbreeRayCaster(scene)
+    one, many = EmbreeRayCaster(scene, bvh=False), EmbreeRayCaster(scene, bvh=False)
     old = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
@@ -135,7 +135,7 @@ def test_compiled_first_triangle_hints_equal_the_numpy_ones(moved, rng, monkeypa
     through embreex: the direct casts are the next test's)."""
     scene = _street_canyon(moved)
     a, b = _segments(scene, rng, 4000)
-    _same_first_triangles(EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True, direct=False),
+    _same_first_triangles(EmbreeRayCaster(scene, compiled=False), EmbreeRayCaster(scene, compiled=True, direct=False, bvh=False),
                           a, b, monkeypatch)
 
 
@@ -166,7 +166,7 @@ def test_direct_casts_decide_and_count_like_the_embreex_path(moved, rng):
     compiled set-up around embreex's calls, both directions, also at 1e6 m rotated."""
     scene = _street_canyon(moved)
     a, b = _segments(scene, rng, 4000)
-    ref, got = EmbreeRayCaster(scene, direct=False), EmbreeRayCaster(scene)
+    ref, got = EmbreeRayCaster(scene, direct=False, bvh=False), EmbreeRayCaster(scene, bvh=False)
     assert ref._direct is None and got._direct is not None
     for x, y in ((a, b), (b, a)):
         expect = ref.occluded(x, y)
@@ -189,7 +189,7 @@ def test_direct_first_triangle_hints_equal_the_embreex_ones(moved, rng, monkeypa
     a, b = _segments(scene, rng, 4000)
     far = scene.vertices.mean(axis=0) + 3 * scene.diagonal * rng.normal(size=(500, 3))
     a, b = np.concatenate([a, far, far]), np.concatenate([b, b[:500], far[::-1]])  # some miss the box
-    ref, got = EmbreeRayCaster(scene, direct=False), EmbreeRayCaster(scene)
+    ref, got = EmbreeRayCaster(scene, direct=False, bvh=False), EmbreeRayCaster(scene, bvh=False)
     assert ref._direct is None and got._direct is not None
     _same_first_triangles(ref, got, a, b, monkeypatch)
 
@@ -203,7 +203,7 @@ def test_without_embrees_library_the_caster_casts_through_embreex(monkeypatch, r
     a, b = _segments(scene, rng, 500)
     expect = EmbreeRayCaster(scene, compiled=False).occluded(a, b)
     monkeypatch.setattr(embree_c, "library", lambda: None)
-    caster = EmbreeRayCaster(scene)
+    caster = EmbreeRayCaster(scene, bvh=False)
     assert caster._direct is None
     np.testing.assert_array_equal(caster.occluded(a, b), expect)
     with pytest.raises(ImportError, match="direct=True"):

@@ -324,3 +324,98 @@ def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol
                 face[r] = f
                 break
     return out, face, rays
+
+
+# ---- occlusion through the float64 tree (wavepaths.raycast.bvh), no float32 step -------------
+@numba.njit(cache=True, nogil=True)
+def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
+    """The exact rule's verdicts (ExactSegments.blocked) for the segments ``A[sel] -> B[sel]``
+    (canonical, recentred), walking the tree of :class:`wavepaths.raycast.bvh.SegmentBVH`:
+    each triangle whose padded box the segment meets is tested as ExactSegments.crosses does
+    (:func:`_confirm_one`'s crossing test, the same expressions), and the walk stops at the
+    first that blocks.
+
+    Returns ``(verdict, face)``: (k,) int8, 0 clear, 1 blocked, 3 undecided here: a crossing
+    next to a triangle's edge (within its plane tolerance, where crosses() also checks for a
+    graze along a coplanar face's boundary) and no other triangle blocking, or a segment with
+    an end that is not finite (face -1); (k,) int64, the triangle of the first such crossing.
+    """
+    k = sel.shape[0]
+    out = np.zeros(k, dtype=np.int8)
+    face = np.full(k, -1, dtype=np.int64)
+    if box.shape[0] == 0:
+        return out, face
+    stack = np.empty(128, dtype=np.int64)
+    for r in range(k):
+        i = sel[r]
+        a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
+        b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
+        if not (math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2) and math.isfinite(b0)
+                and math.isfinite(b1) and math.isfinite(b2)):
+            out[r] = 3
+            continue
+        d0, d1, d2 = b0 - a0, b1 - a1, b2 - a2
+        i0 = 1.0 / d0 if d0 != 0.0 else 0.0
+        i1 = 1.0 / d1 if d1 != 0.0 else 0.0
+        i2 = 1.0 / d2 if d2 != 0.0 else 0.0
+        stack[0] = 0
+        sp = 1
+        verdict = 0
+        while sp > 0:
+            sp -= 1
+            nd = stack[sp]
+            # the part t in [0, 1] of a + t d inside the box (slab by slab; an axis the
+            # segment runs parallel to: its coordinate within the slab)
+            t0, t1 = 0.0, 1.0
+            if d0 != 0.0:
+                u, v = (box[nd, 0] - a0) * i0, (box[nd, 3] - a0) * i0
+                t0, t1 = max(t0, min(u, v)), min(t1, max(u, v))
+            elif a0 < box[nd, 0] or a0 > box[nd, 3]:
+                continue
+            if d1 != 0.0:
+                u, v = (box[nd, 1] - a1) * i1, (box[nd, 4] - a1) * i1
+                t0, t1 = max(t0, min(u, v)), min(t1, max(u, v))
+            elif a1 < box[nd, 1] or a1 > box[nd, 4]:
+                continue
+            if d2 != 0.0:
+                u, v = (box[nd, 2] - a2) * i2, (box[nd, 5] - a2) * i2
+                t0, t1 = max(t0, min(u, v)), min(t1, max(u, v))
+            elif a2 < box[nd, 2] or a2 > box[nd, 5]:
+                continue
+            if t0 > t1:
+                continue
+            c = count[nd]
+            if c == 0:
+                stack[sp] = nd + 1
+                stack[sp + 1] = right[nd]
+                sp += 2
+                continue
+            for q in range(first[nd], first[nd] + c):
+                n0, n1, n2, off, tl = rows[q, 0], rows[q, 1], rows[q, 2], rows[q, 3], rows[q, 4]
+                sa = a0 * n0 + a1 * n1 + a2 * n2 - off
+                sb = b0 * n0 + b1 * n1 + b2 * n2 - off
+                if not ((sa > tl and sb < -tl) or (sa < -tl and sb > tl)):
+                    continue
+                w = sa / (sa - sb)
+                x0, x1, x2 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)
+                inside = True
+                near = False
+                for e in range(3):
+                    o = 5 + 4 * e
+                    dist = rows[q, o] * x0 + rows[q, o + 1] * x1 + rows[q, o + 2] * x2 - rows[q, o + 3]
+                    if dist < -edge_tol:
+                        inside = False
+                        break
+                    elif dist <= tl:
+                        near = True
+                if inside:
+                    if not near:
+                        verdict = 1
+                        break
+                    if verdict == 0:
+                        verdict = 3
+                        face[r] = q  # a row of the tree: the caller maps it to its triangle
+            if verdict == 1:
+                break
+        out[r] = verdict
+    return out, face
