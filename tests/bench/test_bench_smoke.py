@@ -184,3 +184,19 @@ def test_launch_completeness_benchmark_counts_found_sequences_and_power():
     assert row["found"] + len(row["missed"]) == out["diffracted_paths"]
     assert row["found"] == out["diffracted_paths"] and row["power_fraction"] == 1.0
     assert 0 < row["candidates_per_receiver"] < out["exhaustive_candidates_per_receiver"]
+
+
+def test_occlusion_rates_compare_the_casters_and_the_rule():
+    """Benchmark 4's occlusion figures: the Embree forms agree with each other, and the float64
+    tree gives the float64 rule's verdict on every segment (no timing compared)."""
+    from wavepaths.bench.scaling import occlusion_rates
+    from wavepaths.bench.scenes import sionna_scene_xml
+    from wavepaths.search import kernels
+
+    r = occlusion_rates(sionna_scene_xml("simple_street_canyon"), n=3000, rounds=1)
+    assert set(r["ns_per_segment"]) >= {"numpy"}
+    assert 0.05 < r["blocked_fraction"] < 0.95
+    if kernels.available():
+        assert set(r["ns_per_segment"]) == {"numpy", "compiled", "float64 tree"}
+        assert r["same_verdicts"] and r["tree_matches_rule"]
+        assert r["embree_misses_of_rule"] >= 0

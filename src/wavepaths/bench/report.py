@@ -410,10 +410,15 @@ interleaved round by round, and reported as medians over the rounds.</p>
             parts.append(f"<p>{html.escape(sc['analysis'])}</p>")
         oc = sc.get("occlusion")
         if oc and "ns_per_segment" in oc:
-            parts.append(f"<p>Occlusion (Embree, each hit decided in float64): {oc['segments']:,} legs of "
+            parts.append(f"<p>Occlusion (Embree's half-rays, each hit decided in float64, and the float64 tree): {oc['segments']:,} legs of "
                          f"simple_street_canyon ({oc['blocked_fraction']:.0%} blocked), ns per segment.</p>")
             parts.append(_table([[k, v] for k, v in oc["ns_per_segment"].items()]
-                                + [["speed-up", oc.get("speedup")], ["same verdicts", oc.get("same_verdicts")]],
+                                + [["speed-up", oc.get("speedup")], ["same verdicts", oc.get("same_verdicts")],
+                                   ["float64 tree: speed-up over the compiled half-rays",
+                                    oc.get("tree_speedup_over_compiled")],
+                                   ["float64 tree: the float64 rule's verdict on every segment",
+                                    oc.get("tree_matches_rule")],
+                                   ["Embree's half-rays: segments off the float64 rule", oc.get("embree_misses_of_rule")]],
                                 ["set-up and confirmation", "ns per segment"]))
 
     dc = res.get("diffraction_cost")

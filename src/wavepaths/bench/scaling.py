@@ -67,12 +67,15 @@ def scaling_point(xml: str, tx, rx, options: dict, measure_memory: bool = True, 
 
 
 def occlusion_rates(xml: str, n: int = 200_000, rounds: int = 3) -> dict:
-    """ns per segment of :meth:`EmbreeRayCaster.occluded`, compiled against numpy (one process).
+    """ns per segment of :meth:`EmbreeRayCaster.occluded`: Embree's half-rays with the numpy
+    and the compiled set-up, and the float64 tree (``bvh=True``, the default on scenes of at
+    most :data:`~wavepaths.raycast.bvh.BVH_MAX_TRIANGLES` triangles), in one process.
 
     The segments are the search's kind: from a random point on a random face of the scene
-    to a random point of its box at 1.5 m height (a leg to a receiver). Both casters are
-    timed in alternation, ``rounds`` times, on the same segments; their verdicts are
-    compared (``same_verdicts``).
+    to a random point of its box at 1.5 m height (a leg to a receiver). The casters are
+    timed in alternation, ``rounds`` times, on the same segments. The two Embree forms'
+    verdicts are compared (``same_verdicts``), and the tree's and Embree's with the float64
+    rule against every triangle (``tree_matches_rule``, ``embree_misses_of_rule``).
     """
     from ..raycast.embree import EmbreeRayCaster, _compiled
     from ..scene import load_scene
@@ -86,14 +89,22 @@ def occlusion_rates(xml: str, n: int = 200_000, rounds: int = 3) -> dict:
     b = np.column_stack([rng.uniform(lo[0], hi[0], n), rng.uniform(lo[1], hi[1], n), np.full(n, 1.5)])
     casters = {"numpy": EmbreeRayCaster(scene, compiled=False)}
     if _compiled() is not None:
-        casters["compiled"] = EmbreeRayCaster(scene, compiled=True)
+        casters["compiled"] = EmbreeRayCaster(scene, compiled=True, bvh=False)
+        casters["float64 tree"] = EmbreeRayCaster(scene, bvh=True)
     verdicts = {k: c.occluded(a, b) for k, c in casters.items()}  # warm-up (and the kernels' compilation)
     times = interleaved({k: (lambda c=c: c.occluded(a, b)) for k, c in casters.items()}, rounds)
     out = {"segments": n, "blocked_fraction": float(verdicts["numpy"].mean()),
            "ns_per_segment": {k: t.median_s / n * 1e9 for k, t in times.items()}}
     if "compiled" in casters:
+        from ..raycast import canonical
+
         out["speedup"] = times["numpy"].median_s / times["compiled"].median_s
         out["same_verdicts"] = bool((verdicts["numpy"] == verdicts["compiled"]).all())
+        out["tree_speedup_over_compiled"] = times["compiled"].median_s / times["float64 tree"].median_s
+        A, B, _ = canonical(a - scene.center, b - scene.center)
+        rule = casters["numpy"]._exact.blocked(A, B)
+        out["tree_matches_rule"] = bool((verdicts["float64 tree"] == rule).all())
+        out["embree_misses_of_rule"] = int((verdicts["compiled"] != rule).sum())
     return out
 
 
