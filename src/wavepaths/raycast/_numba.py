@@ -346,6 +346,7 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
     if box.shape[0] == 0:
         return out, face
     stack = np.empty(128, dtype=np.int64)
+    last = -1  # the row that blocked the last blocked segment: tried first (any blocker decides)
     for r in range(k):
         i = sel[r]
         a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
@@ -353,6 +354,9 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
         if not (math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2) and math.isfinite(b0)
                 and math.isfinite(b1) and math.isfinite(b2)):
             out[r] = 3
+            continue
+        if last >= 0 and _row_crossing(rows, last, a0, a1, a2, b0, b1, b2, edge_tol) == 1:
+            out[r] = 1
             continue
         d0, d1, d2 = b0 - a0, b1 - a1, b2 - a2
         i0 = 1.0 / d0 if d0 != 0.0 else 0.0
@@ -391,31 +395,39 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
                 sp += 2
                 continue
             for q in range(first[nd], first[nd] + c):
-                n0, n1, n2, off, tl = rows[q, 0], rows[q, 1], rows[q, 2], rows[q, 3], rows[q, 4]
-                sa = a0 * n0 + a1 * n1 + a2 * n2 - off
-                sb = b0 * n0 + b1 * n1 + b2 * n2 - off
-                if not ((sa > tl and sb < -tl) or (sa < -tl and sb > tl)):
-                    continue
-                w = sa / (sa - sb)
-                x0, x1, x2 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)
-                inside = True
-                near = False
-                for e in range(3):
-                    o = 5 + 4 * e
-                    dist = rows[q, o] * x0 + rows[q, o + 1] * x1 + rows[q, o + 2] * x2 - rows[q, o + 3]
-                    if dist < -edge_tol:
-                        inside = False
-                        break
-                    elif dist <= tl:
-                        near = True
-                if inside:
-                    if not near:
-                        verdict = 1
-                        break
-                    if verdict == 0:
-                        verdict = 3
-                        face[r] = q  # a row of the tree: the caller maps it to its triangle
+                v = _row_crossing(rows, q, a0, a1, a2, b0, b1, b2, edge_tol)
+                if v == 1:
+                    verdict = 1
+                    last = q
+                    break
+                if v == 3 and verdict == 0:
+                    verdict = 3
+                    face[r] = q  # a row of the tree: the caller maps it to its triangle
             if verdict == 1:
                 break
         out[r] = verdict
     return out, face
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row_crossing(rows, q, a0, a1, a2, b0, b1, b2, edge_tol):
+    """ExactSegments.crosses' test of the segment ``a -> b`` against the triangle of row ``q``
+    of the tree (:func:`_confirm_one`'s crossing test, the same expressions): 0 no crossing,
+    1 a crossing inside the triangle, 3 a crossing inside it but within its plane tolerance
+    of an edge (left to crosses(), which checks for a graze there)."""
+    n0, n1, n2, off, tl = rows[q, 0], rows[q, 1], rows[q, 2], rows[q, 3], rows[q, 4]
+    sa = a0 * n0 + a1 * n1 + a2 * n2 - off
+    sb = b0 * n0 + b1 * n1 + b2 * n2 - off
+    if not ((sa > tl and sb < -tl) or (sa < -tl and sb > tl)):
+        return 0
+    w = sa / (sa - sb)
+    x0, x1, x2 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)
+    near = False
+    for e in range(3):
+        o = 5 + 4 * e
+        dist = rows[q, o] * x0 + rows[q, o + 1] * x1 + rows[q, o + 2] * x2 - rows[q, o + 3]
+        if dist < -edge_tol:
+            return 0
+        if dist <= tl:
+            near = True
+    return 3 if near else 1
