@@ -332,13 +332,16 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
     """The exact rule's verdicts (ExactSegments.blocked) for the segments ``A[sel] -> B[sel]``
     (canonical, recentred), walking the tree of :class:`wavepaths.raycast.bvh.SegmentBVH`:
     each triangle whose padded box the segment meets is tested as ExactSegments.crosses does
-    (:func:`_confirm_one`'s crossing test, the same expressions), and the walk stops at the
-    first that blocks.
+    (:func:`_row_crossing`), and the walk stops at the first that blocks. The triangle that
+    blocked the last blocked segment is tried before the walk: any triangle that blocks
+    decides the verdict, so this changes no answer, and neighbouring legs (the search's are
+    grouped by receiver) are often blocked by the same wall.
 
-    Returns ``(verdict, face)``: (k,) int8, 0 clear, 1 blocked, 3 undecided here: a crossing
+    Returns ``(verdict, row)``: (k,) int8, 0 clear, 1 blocked, 3 undecided here: a crossing
     next to a triangle's edge (within its plane tolerance, where crosses() also checks for a
     graze along a coplanar face's boundary) and no other triangle blocking, or a segment with
-    an end that is not finite (face -1); (k,) int64, the triangle of the first such crossing.
+    an end that is not finite (row -1); (k,) int64, the tree's row of the first such crossing
+    (``SegmentBVH.triangle`` maps rows to triangles).
     """
     k = sel.shape[0]
     out = np.zeros(k, dtype=np.int8)

@@ -83,8 +83,8 @@ class EmbreeRayCaster:
     triangles instead (:mod:`wavepaths.raycast.bvh`,
     :func:`wavepaths.raycast._numba.occluded_bvh`): each segment is decided by the float64
     rule against the triangles whose padded boxes it meets, with no float32 step at all
-    (a crossing next to a triangle's edge goes to the float64 test against the whole scene,
-    as above). ``None`` (default): for scenes of at most
+    (a crossing next to a triangle's edge is decided as a half-ray's hit there is: by
+    ``crosses`` on that triangle, then by the float64 test against the whole scene). ``None`` (default): for scenes of at most
     :data:`~wavepaths.raycast.bvh.BVH_MAX_TRIANGLES` triangles, where it is the faster
     (the street canyon's path legs: 75 ns per segment against 170 ns); ``True``: always;
     ``False``: never. Embree still answers :meth:`first_triangle` and :meth:`first_hits`
@@ -125,7 +125,7 @@ class EmbreeRayCaster:
         use_bvh = bvh if bvh is not None else len(scene.triangles) <= BVH_MAX_TRIANGLES
         self._bvh = build_segment_bvh(self._exact) if use_bvh and self._kernels is not None else None
         self._rays = 0
-        self.exact_fallbacks = 0  # segments Embree could not decide, decided in float64
+        self.exact_fallbacks = 0  # segments Embree (or the tree) could not decide, decided in float64
 
     def _threads(self, k: int) -> int:
         """Threads for an occlusion query of ``k`` segments: numba's thread count (1 in the
