@@ -119,24 +119,3 @@ def test_the_caster_builds_the_tree_for_small_scenes_only(monkeypatch):
     monkeypatch.setattr(bvh, "BVH_MAX_TRIANGLES", len(scene.triangles) - 1)
     assert EmbreeRayCaster(scene)._bvh is None
     assert EmbreeRayCaster(scene, bvh=True)._bvh is not None
-
-
-@needs_numba
-def test_the_trees_verdicts_are_the_same_on_numbas_threads(monkeypatch, rng):
-    import numba
-
-    scene = load_scene("street_canyon")
-    a, b = _segments(scene, rng, 4000)
-    monkeypatch.setattr(embree, "THREAD_MIN_SEGMENTS", 1000)
-    caster = EmbreeRayCaster(scene, bvh=True)
-    old = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        expect = caster.occluded(a, b)
-        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        if numba.config.NUMBA_NUM_THREADS < 2:
-            pytest.skip("one CPU: nothing to split")
-        assert caster._threads(len(a)) >= 2
-        np.testing.assert_array_equal(caster.occluded(a, b), expect)
-    finally:
-        numba.set_num_threads(old)

@@ -102,15 +102,17 @@ def test_without_numba_the_default_caster_runs_the_numpy_reference(monkeypatch, 
 
 
 @needs_numba
-def test_threaded_occlusion_decides_and_counts_like_one_thread(monkeypatch, rng):
+@pytest.mark.parametrize("tree", [False, True], ids=["half_rays", "float64_tree"])
+def test_threaded_occlusion_decides_and_counts_like_one_thread(tree, monkeypatch, rng):
     """A query split over threads (numba's thread count) gives the same verdicts, in order,
-    and the same ray and fallback counts as on one thread."""
+    and the same ray and fallback counts as on one thread, with Embree's half-rays and with
+    the float64 tree."""
     import numba
 
     scene = load_scene("street_canyon")
     a, b = _segments(scene, rng, 4000)
     monkeypatch.setattr(embree, "THREAD_MIN_SEGMENTS", 1000)  # 12,050 segments: several slices
-    one, many = EmbreeRayCaster(scene, bvh=False), EmbreeRayCaster(scene, bvh=False)
+    one, many = EmbreeRayCaster(scene, bvh=tree), EmbreeRayCaster(scene, bvh=tree)
     old = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
