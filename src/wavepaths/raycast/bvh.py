@@ -7,11 +7,13 @@ two half-rays of a segment meets first and decides that face in float64; a segme
 leaves undecided goes to the float64 test against the whole scene. On small scenes a
 compiled walk of this tree answers the same question faster, in float64 from the start:
 each segment is tested, by the rule of ``ExactSegments.crosses``, against every triangle
-whose padded box it meets, and stops at the first that blocks it (any hit). On the legs of
-the street canyon's R2+D1 map (74 triangles) that is 75 ns per segment against 170 ns, on
-``etoile_crop``'s path legs (948 triangles) 188 ns against 278 ns; on random long
-segments in munich (38,936 triangles) Embree's wider tree is faster (458 ns against 626 ns),
-so the caster builds this tree only up to :data:`BVH_MAX_TRIANGLES` triangles.
+whose padded box it meets, and stops at the first that blocks it (any hit). One thread, per
+segment: the legs of the street canyon's R2+D1 map (74 triangles) 76-83 ns against 170-188 ns,
+``etoile_crop``'s path legs (948 triangles) 180 ns against 278 ns, munich's path legs
+(38,936 triangles) 285 ns against 370 ns; on random long segments across ``etoile`` (13,098
+triangles) and munich Embree's wider tree is faster (331 ns against 451 ns, 458 ns against
+633 ns), so the caster builds this tree by default only up to :data:`BVH_MAX_TRIANGLES`
+triangles (docs/search.md).
 
 The tree: binary, its nodes in depth-first order (a node's left child follows it), each
 with the float64 box of its triangles' boxes padded by ``ExactSegments.pad`` (so that a
