@@ -43,7 +43,7 @@ def test_amplitude_bounds_kernel_matches_the_numpy_bound():
     from types import SimpleNamespace
 
     from wavepaths.fields.chain import SIN_BETA_0_FLOOR
-    from wavepaths.search import _numba
+    from wavepaths.search import _numba_tolerance as _numba
     from wavepaths.search.diffraction import UTD_BOUND_FLOOR, _diffraction_amplitude_bound
     from wavepaths.search.paths import SPEED_OF_LIGHT
 
@@ -62,7 +62,7 @@ def test_amplitude_bounds_kernel_matches_the_numpy_bound():
 def test_tolerance_drop_kernel_matches_the_numpy_reference():
     """The same candidates dropped, bit for bit: ties in bound (kept in their order), infinite
     bounds (never dropped, and not ending the drops of the pairs after them), empty pairs."""
-    from wavepaths.search import _numba
+    from wavepaths.search import _numba_tolerance as _numba
 
     rng = np.random.default_rng(5)
     for trial in range(20):

@@ -249,9 +249,9 @@ def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power
     pair = np.concatenate([p.tx * k + p.rx for p in pending])
     bound = np.concatenate([np.full(len(p), np.inf) if p.amp is None else p.amp for p in pending]) ** 2 * scale
     if ctx.options.compiled and kernels.available():
-        from ..search import _numba
+        from ..search import _numba_tolerance
 
-        drop = _numba.tolerance_drop(pair.astype(np.int64), bound, np.ascontiguousarray(go_power, dtype=np.float64),
+        drop = _numba_tolerance.tolerance_drop(pair.astype(np.int64), bound, np.ascontiguousarray(go_power, dtype=np.float64),
                                      float(eps), int(len(go_power)))
     else:
         drop = _tolerance_drop_numpy(pair, bound, go_power, eps)

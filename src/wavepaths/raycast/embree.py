@@ -315,17 +315,8 @@ class EmbreeRayCaster:
             return blocked
         verdict, row = self._kernels.occluded_bvh(A, B, sel, t.box, t.first, t.count, t.right, t.rows, t.edge_tol)
         blocked[sel[verdict == 1]] = True
-        rest = sel[(verdict == 3) & (row < 0)]
-        near = np.nonzero((verdict == 3) & (row >= 0))[0]
-        if len(near):
-            # a crossing next to a triangle's edge: that triangle by the numpy crosses(), with
-            # its graze check, as the half-rays' verdict 3; if it does not block, the segment
-            # goes to the float64 test against the whole scene
-            s3, f3 = sel[near], t.triangle[row[near]]
-            confirmed = self._exact.crosses(A[s3], B[s3], f3)
-            blocked[s3[confirmed]] = True
-            rest = np.concatenate([rest, s3[~confirmed]])
-        return self._decide_exact(A, B, rest, blocked)
+        near = (verdict == 3) & (row >= 0)  # a crossing next to a triangle's edge, as the half-rays' 3
+        return self._decide_edges(A, B, sel[near], t.triangle[row[near]], sel[(verdict == 3) & (row < 0)], blocked)
 
     def _halves_direct(self, A: np.ndarray, B: np.ndarray, live: np.ndarray) -> np.ndarray:
         """:meth:`_halves_core` in one compiled pass that casts through Embree's C entry point
@@ -345,13 +336,17 @@ class EmbreeRayCaster:
         with _COUNT_LOCK:
             self._rays += int(rays)
         blocked[sel[verdict == 1]] = True
-        rest = sel[verdict == 2]
-        near = np.nonzero(verdict == 3)[0]
-        if len(near):
-            s3, p3 = sel[near], face[near]
-            confirmed = ex.crosses(A[s3], B[s3], p3)
-            blocked[s3[confirmed]] = True
-            rest = np.concatenate([rest, s3[~confirmed]])
+        return self._decide_edges(A, B, sel[verdict == 3], face[verdict == 3], sel[verdict == 2], blocked)
+
+    def _decide_edges(self, A: np.ndarray, B: np.ndarray, seg: np.ndarray, face: np.ndarray, rest: np.ndarray,
+                      blocked: np.ndarray) -> np.ndarray:
+        """``blocked`` with the segments ``seg``, each crossing triangle ``face`` next to one of
+        its edges, decided by the numpy ``crosses`` on that triangle (with its graze check), and
+        those it does not confirm, with ``rest``, by :meth:`_decide_exact`."""
+        if len(seg):
+            confirmed = self._exact.crosses(A[seg], B[seg], face)
+            blocked[seg[confirmed]] = True
+            rest = np.concatenate([rest, seg[~confirmed]])
         return self._decide_exact(A, B, rest, blocked)
 
     def _decide_exact(self, A: np.ndarray, B: np.ndarray, rest: np.ndarray, blocked: np.ndarray) -> np.ndarray:

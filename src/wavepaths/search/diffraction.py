@@ -592,10 +592,11 @@ def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, sta
     amp = None
     if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
         from ..fields.chain import SIN_BETA_0_FLOOR
+        from . import _numba_tolerance
         from .paths import SPEED_OF_LIGHT
 
         # _diffraction_amplitude_bound (the numpy reference), candidate by candidate
-        amp = _numba.amplitude_bounds(rside.phi[rr], tside.phi[ss], ctx.sectors.width[d, sec] / np.pi, tside.t[ss],
+        amp = _numba_tolerance.amplitude_bounds(rside.phi[rr], tside.phi[ss], ctx.sectors.width[d, sec] / np.pi, tside.t[ss],
                                       tside.rho[ss], rside.t[rr], rside.rho[rr], t[keep],
                                       2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT, SIN_BETA_0_FLOOR,
                                       UTD_BOUND_FLOOR)

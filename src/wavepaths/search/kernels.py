@@ -28,9 +28,9 @@ culling of the sources per chunk of receivers (``_numba.keller_cone_keep``, same
 the back-traces of the image method (``_numba.backtrace``, :mod:`wavepaths.search.images`),
 the proof that a mirror is hidden from a source (``_numba_mirrors.behind``,
 :mod:`wavepaths.search.mirror_visibility`), and the tolerance of coverage maps: the
-diffracted candidates' amplitude bounds (``_numba.amplitude_bounds``,
+diffracted candidates' amplitude bounds (``_numba_tolerance.amplitude_bounds``,
 :mod:`wavepaths.search.diffraction`) and the choice of those dropped
-(``_numba.tolerance_drop``, :mod:`wavepaths.coverage.solver`).
+(``_numba_tolerance.tolerance_drop``, :mod:`wavepaths.coverage.solver`).
 
 numba is an optional dependency (the ``fast`` extra). Without it, or with
 ``TraceOptions(compiled=False)``, the numpy reference runs and finds the same paths.
@@ -143,11 +143,11 @@ def warm_up() -> bool:
                    listed=(one, np.array([0, 1]), np.zeros(1, np.int64), np.zeros(1, np.int64)))
     # the tolerance of coverage maps (TraceOptions.tolerance_db): the candidates' amplitude
     # bounds and the choice of the dropped ones
-    from . import _numba
+    from . import _numba_tolerance
 
     z = np.zeros(2)
-    _numba.amplitude_bounds(z, z, z + 1.5, z, z + 1.0, z, z + 1.0, z, 1.0, 1e-6, 1e-6)
-    _numba.tolerance_drop(one, z.copy(), z.copy(), 0.1, 1)
+    _numba_tolerance.amplitude_bounds(z, z, z + 1.5, z, z + 1.0, z, z + 1.0, z, 1.0, 1e-6, 1e-6)
+    _numba_tolerance.tolerance_drop(one, z.copy(), z.copy(), 0.1, 1)
     return True
 
 
