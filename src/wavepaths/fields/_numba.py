@@ -126,7 +126,7 @@ def _csqrt(a, b):
     # signed zeros included), as (re, im)
     if a == 0.0 and b == 0.0:
         return 0.0, b
-    m = math.hypot(a, b)
+    m = math.sqrt(a * a + b * b)  # |a + jb| (no overflow: |eta - 1 + c^2| is far below 1e150)
     if a >= 0.0:
         t = math.sqrt(0.5 * (m + a))
         return t, 0.5 * b / t

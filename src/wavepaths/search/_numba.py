@@ -88,7 +88,7 @@ def _receiver_row(i, buf, fm, fb, I, n, off, side, A, B, plane_tol, mirror, to_q
             x = v0 * x_hat[0, j] + v1 * x_hat[1, j] + v2 * x_hat[2, j]
             y = v0 * y_hat[0, j] + v1 * y_hat[1, j] + v2 * y_hat[2, j]
             t = v0 * direction[0, j] + v1 * direction[1, j] + v2 * direction[2, j]
-            rho = np.hypot(x, y)
+            rho = math.sqrt(x * x + y * y)
             buf[c2] = j
             c2 += (t - v_lo[j] - lo[j] * rho >= -keller_tol) and (t - v_hi[j] - hi[j] * rho <= keller_tol)
         cm[3] += c - c2
@@ -482,7 +482,7 @@ def end_sides(images, rows, d, origin, direction, x_hat, y_hat, angles, count, w
         sec_o[n] = sec
         phi_o[n] = phi
         t_o[n] = t
-        rho_o[n] = np.hypot(x, y)
+        rho_o[n] = math.sqrt(x * x + y * y)
         n += 1
     return n
 
@@ -661,7 +661,8 @@ def diffraction_vertices(rows, src_rows, t, r_row, r_dih, r_sec, r_phi, r_t, r_r
         dd = r_dih[ri]
         ph, pp = r_phi[ri], s_phi[si]
         wedge = width[dd, r_sec[ri]]
-        leg = min(math.hypot(s_t[si] - ti, s_rho[si]), math.hypot(r_t[ri] - ti, r_rho[ri]))
+        a_t, b_t = s_t[si] - ti, r_t[ri] - ti
+        leg = math.sqrt(min(a_t * a_t + s_rho[si] * s_rho[si], b_t * b_t + r_rho[ri] * r_rho[ri]))
         offs = min(abs(abs(ph - pp) - np.pi), abs(ph + pp - np.pi))
         offs = min(offs, abs(ph + pp - (2 * wedge - np.pi)))
         near[i] = offs * leg < near_tol

@@ -22,8 +22,9 @@ def amplitude_bounds(phi, phi_prime, n, te, de, tr, dr, t, k, floor, utd_floor):
     two_pi = 2.0 * math.pi
     root_k = math.sqrt(two_pi * k)
     for i in range(m):
-        s_in = math.hypot(te[i] - t[i], de[i])
-        s_out = math.hypot(tr[i] - t[i], dr[i])
+        a_t, b_t = te[i] - t[i], tr[i] - t[i]
+        s_in = math.sqrt(a_t * a_t + de[i] * de[i])
+        s_out = math.sqrt(b_t * b_t + dr[i] * dr[i])
         q = de[i] / s_in if s_in != 0.0 else math.nan  # s_in = 0: de = 0 too, the reference's 0 / 0
         if q != q:
             out[i] = math.inf

@@ -431,7 +431,7 @@ def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.
     patterns, a diffracted path's coefficient is at most
     ``(lambda / 4 pi) |D| / sqrt(s s' (s + s'))`` (UTD, spherical incidence; ``s'``, ``s`` the
     unfolded lengths before and after the edge, from the images' reduced coordinates:
-    ``s' = hypot(t_e - t, d_e)``, ``s = hypot(t_r - t, d_r)``), with ``|D|`` at most
+    ``s' = sqrt((t_e - t)^2 + d_e^2)``, ``s = sqrt((t_r - t)^2 + d_r^2)``), with ``|D|`` at most
     :func:`~wavepaths.em.utd.utd_magnitude_bound` at the lowest frequency the fields will
     use (``prune_frequency_hz``; the bound does not grow with frequency). The result carries
     a 1 % margin for the rounding between the search's angles and the fields'.
@@ -441,8 +441,8 @@ def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.
     from .paths import SPEED_OF_LIGHT
 
     k = 2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT
-    s_in = np.hypot(te - t, de)
-    s_out = np.hypot(tr - t, dr)
+    s_in = np.sqrt((te - t) ** 2 + de * de)
+    s_out = np.sqrt((tr - t) ** 2 + dr * dr)
     with np.errstate(divide="ignore", invalid="ignore"):
         sin_b = np.maximum(de / s_in, SIN_BETA_0_FLOOR)
         L = s_in * s_out / (s_in + s_out) * sin_b**2
@@ -505,7 +505,7 @@ def _diffraction_candidates_numpy(scene, ctx, a, b, rx, rx_lv, rx_offset, stats,
     # GO rays within the float32 uncertainty of the edge: the angular distance to the shadow
     # or reflection boundary times the shorter leg
     wedge = ctx.sectors.width[d, sec]
-    leg = np.minimum(np.hypot(te - t, de), np.hypot(tr - t, dr))
+    leg = np.sqrt(np.minimum((te - t) ** 2 + de * de, (tr - t) ** 2 + dr * dr))
     offs = np.minimum(np.abs(np.abs(phi - phi_prime) - np.pi), np.abs(phi + phi_prime - np.pi))
     offs = np.minimum(offs, np.abs(phi + phi_prime - (2 * wedge - np.pi)))
     near = offs * leg < 4 * scene.length_tolerance(scene.tolerances.ray_offset)

@@ -124,7 +124,7 @@ def _kept_pairs_end_side(scene: "Scene", ctx: TxContext, rx_lv: ImageLevel, e: n
         keep = keep[:n]
         return _EndSide(e[keep], d[keep], sec[:n], phi[:n], t[:n], rho[:n])
     x, y, t = _edge_frame(scene, ctx, rx_lv.last[e], d)
-    rho = np.hypot(x, y)
+    rho = np.sqrt(x * x + y * y)
     if window is not None:
         inside = _in_keller_window(scene, window, d, t, rho)
         stats[f"{tag}_receiver_pairs_rejected_keller_window"] += int((~inside).sum())
@@ -327,4 +327,4 @@ def _transmitter_side(scene: "Scene", ctx: TxContext, tx_lv: ImageLevel, src) ->
     d = src.dihedron
     x, y, t = _edge_frame(scene, ctx, tx_lv.last[src.chain], d)
     sec, _, phi = _sector_in_table(ctx, d, x, y)
-    return _EndSide(src.chain, d, sec, phi, t, np.hypot(x, y), src.visible)
+    return _EndSide(src.chain, d, sec, phi, t, np.sqrt(x * x + y * y), src.visible)

@@ -191,7 +191,7 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
             good &= sec == tside.sector[s_rows]
             stats[f"{tag}_rejected_sector"] += int((~good).sum())
             e = np.nonzero(good)[0]
-            rside = _EndSide(e, d[e], sec[e], phi[e], t[e], np.hypot(x[e], y[e]))
+            rside = _EndSide(e, d[e], sec[e], phi[e], t[e], np.sqrt(x[e] * x[e] + y[e] * y[e]))
             rejected = np.zeros(3, np.int64)
             rows, src_rows, tt = _diffraction_prefilter(scene, ctx, rside, np.arange(len(e)), tside, s_rows[e],
                                                         rejected)
