@@ -19,6 +19,10 @@ The plane tolerance is :func:`plane_tolerance` (1e-12 of the scene diagonal plus
 the scene's distance from the origin: above float64 rounding, far below any geometry),
 plus, for a triangle merged into a polygon within ``coplanar_angle``, its corners'
 distance from the polygon's plane (see :class:`~wavepaths.raycast.numpy_caster.ExactSegments`).
+"A point of the closed triangle" is within ``edge_tol`` (1e-12 of the diagonal) inside each
+edge and within the triangle's box grown by ``edge_tol`` (which bounds the tolerance at sharp
+corners); every implementation adds its sums in one order, so that all agree bit for bit
+(docs/stress.md, "What blocks a segment").
 The decision is symmetric in the end points: both casters put them in a canonical order
 (:func:`canonical`) before any arithmetic, so ``a -> b`` and ``b -> a`` give bit-identical
 answers. No end is pulled in by an offset: the rule itself makes end points on surfaces

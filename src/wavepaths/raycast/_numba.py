@@ -147,7 +147,8 @@ def leg_canonical_recentred(V, alive, i, j, center):
 
 
 @numba.njit(cache=True, nogil=True)
-def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_offset, edge_tol, reached):
+def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_offset, edge_tol, box_lo, box_hi,
+                 reached):
     """(k,) int8: the float64 verdict on each hit ``prim[r]`` of segment ``seg[r]``'s half-ray.
 
     0: the face does not block, contains the ray's target end in its plane and not the
@@ -164,7 +165,7 @@ def confirm_hits(A, B, seg, prim, second, normal, offset, tol, inward, inward_of
     for r in range(k):
         i = seg[r]
         out[r] = _confirm_one(A[i, 0], A[i, 1], A[i, 2], B[i, 0], B[i, 1], B[i, 2], prim[r], second, normal, offset, tol,
-                              inward, inward_offset, edge_tol, reached[r])
+                              inward, inward_offset, edge_tol, box_lo, box_hi, reached[r])
     return out
 
 
@@ -190,9 +191,12 @@ def _call_intersect1(typingctx, fn, scene, rayhit):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward, inward_offset, edge_tol, reached):
+def _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward, inward_offset, edge_tol, box_lo,
+                 box_hi, reached):
     """The verdict of :func:`confirm_hits` on one hit: face ``f`` met by the half-ray of the
-    segment ``a -> b`` (the second half-ray if ``second``), ``reached`` its far end."""
+    segment ``a -> b`` (the second half-ray if ``second``), ``reached`` its far end. The
+    crossing test is ExactSegments.crosses' with its sums in the same order and its
+    comparisons false on NaN, as numpy's are."""
     n0, n1, n2, d = normal[f, 0], normal[f, 1], normal[f, 2], offset[f]
     sa = a0 * n0 + a1 * n1 + a2 * n2 - d
     sb = b0 * n0 + b1 * n1 + b2 * n2 - d
@@ -200,11 +204,12 @@ def _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward,
     if (sa > tl and sb < -tl) or (sa < -tl and sb > tl):
         w = sa / (sa - sb)
         x0, x1, x2 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)
-        inside = True
+        inside = (box_lo[f, 0] <= x0 <= box_hi[f, 0] and box_lo[f, 1] <= x1 <= box_hi[f, 1]
+                  and box_lo[f, 2] <= x2 <= box_hi[f, 2])
         near = False
         for e in range(3):
             dist = inward[f, e, 0] * x0 + inward[f, e, 1] * x1 + inward[f, e, 2] * x2 - inward_offset[f, e]
-            if dist < -edge_tol:
+            if not dist >= -edge_tol:
                 inside = False
             elif dist <= tl:
                 near = True
@@ -278,7 +283,8 @@ def nearest_direct(origin, target, lo, hi, fn, scene):
 
 
 @numba.njit(cache=True, nogil=True)
-def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol, inward, inward_offset, edge_tol):
+def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol, inward, inward_offset, edge_tol,
+                    box_lo, box_hi):
     """The verdicts of :meth:`wavepaths.raycast.embree.EmbreeRayCaster._halves_core` for the
     segments ``A[sel] -> B[sel]`` (canonical, recentred, with length), in one pass: each
     segment's first half-ray (:func:`half_rays`), cast by ``rtcIntersect1`` (address ``fn``,
@@ -318,7 +324,7 @@ def occluded_direct(A, B, sel, lo, hi, reach_tol, fn, scene, normal, offset, tol
                 continue  # nothing on this half
             reached = buf[8] >= span - reach_tol  # the hit's distance, written over tfar
             v = _confirm_one(a0, a1, a2, b0, b1, b2, f, second, normal, offset, tol, inward, inward_offset, edge_tol,
-                             reached)
+                             box_lo, box_hi, reached)
             if v != 0:
                 out[r] = v
                 face[r] = f
@@ -337,11 +343,17 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
     decides the verdict, so this changes no answer, and neighbouring legs (the search's are
     grouped by receiver) are often blocked by the same wall.
 
+    The boxes are met by slabs computed in float64, whose rounding grows with the ends'
+    distance from the scene's centre: each box is grown by ``4e-15`` of the segment's largest
+    coordinate (beyond the boxes' own padding, which covers the rounding of ends within the
+    scene), so that a segment with an end far away still meets the boxes of the triangles it
+    crosses.
+
     Returns ``(verdict, row)``: (k,) int8, 0 clear, 1 blocked, 3 undecided here: a crossing
     next to a triangle's edge (within its plane tolerance, where crosses() also checks for a
     graze along a coplanar face's boundary) and no other triangle blocking, or a segment with
-    an end that is not finite (row -1); (k,) int64, the tree's row of the first such crossing
-    (``SegmentBVH.triangle`` maps rows to triangles).
+    an end that is not finite or ends whose difference overflows (row -1); (k,) int64, the
+    tree's row of the first such crossing (``SegmentBVH.triangle`` maps rows to triangles).
     """
     k = sel.shape[0]
     out = np.zeros(k, dtype=np.int8)
@@ -358,10 +370,14 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
                 and math.isfinite(b1) and math.isfinite(b2)):
             out[r] = 3
             continue
+        d0, d1, d2 = b0 - a0, b1 - a1, b2 - a2
+        if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
+            out[r] = 3  # |b - a| overflows: left to the numpy reference
+            continue
         if last >= 0 and _row_crossing(rows, last, a0, a1, a2, b0, b1, b2, edge_tol) == 1:
             out[r] = 1
             continue
-        d0, d1, d2 = b0 - a0, b1 - a1, b2 - a2
+        g = 4e-15 * max(max(abs(a0), abs(a1)), max(max(abs(a2), abs(b0)), max(abs(b1), abs(b2))))
         i0 = 1.0 / d0 if d0 != 0.0 else 0.0
         i1 = 1.0 / d1 if d1 != 0.0 else 0.0
         i2 = 1.0 / d2 if d2 != 0.0 else 0.0
@@ -374,20 +390,22 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
             # the part t in [0, 1] of a + t d inside the box (slab by slab; an axis the
             # segment runs parallel to: its coordinate within the slab)
             t0, t1 = 0.0, 1.0
+            lo0, lo1, lo2 = box[nd, 0] - g, box[nd, 1] - g, box[nd, 2] - g
+            hi0, hi1, hi2 = box[nd, 3] + g, box[nd, 4] + g, box[nd, 5] + g
             if d0 != 0.0:
-                u, v = (box[nd, 0] - a0) * i0, (box[nd, 3] - a0) * i0
+                u, v = (lo0 - a0) * i0, (hi0 - a0) * i0
                 t0, t1 = max(t0, min(u, v)), min(t1, max(u, v))
-            elif a0 < box[nd, 0] or a0 > box[nd, 3]:
+            elif a0 < lo0 or a0 > hi0:
                 continue
             if d1 != 0.0:
-                u, v = (box[nd, 1] - a1) * i1, (box[nd, 4] - a1) * i1
+                u, v = (lo1 - a1) * i1, (hi1 - a1) * i1
                 t0, t1 = max(t0, min(u, v)), min(t1, max(u, v))
-            elif a1 < box[nd, 1] or a1 > box[nd, 4]:
+            elif a1 < lo1 or a1 > hi1:
                 continue
             if d2 != 0.0:
-                u, v = (box[nd, 2] - a2) * i2, (box[nd, 5] - a2) * i2
+                u, v = (lo2 - a2) * i2, (hi2 - a2) * i2
                 t0, t1 = max(t0, min(u, v)), min(t1, max(u, v))
-            elif a2 < box[nd, 2] or a2 > box[nd, 5]:
+            elif a2 < lo2 or a2 > hi2:
                 continue
             if t0 > t1:
                 continue
@@ -415,9 +433,9 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol):
 @numba.njit(cache=True, nogil=True, inline="always")
 def _row_crossing(rows, q, a0, a1, a2, b0, b1, b2, edge_tol):
     """ExactSegments.crosses' test of the segment ``a -> b`` against the triangle of row ``q``
-    of the tree (:func:`_confirm_one`'s crossing test, the same expressions): 0 no crossing,
-    1 a crossing inside the triangle, 3 a crossing inside it but within its plane tolerance
-    of an edge (left to crosses(), which checks for a graze there)."""
+    of the tree (:func:`_confirm_one`'s crossing test, the same expressions, comparisons false
+    on NaN): 0 no crossing, 1 a crossing inside the triangle, 3 a crossing inside it but
+    within its plane tolerance of an edge (left to crosses(), which checks for a graze there)."""
     n0, n1, n2, off, tl = rows[q, 0], rows[q, 1], rows[q, 2], rows[q, 3], rows[q, 4]
     sa = a0 * n0 + a1 * n1 + a2 * n2 - off
     sb = b0 * n0 + b1 * n1 + b2 * n2 - off
@@ -425,11 +443,13 @@ def _row_crossing(rows, q, a0, a1, a2, b0, b1, b2, edge_tol):
         return 0
     w = sa / (sa - sb)
     x0, x1, x2 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)
+    if not (rows[q, 17] <= x0 <= rows[q, 20] and rows[q, 18] <= x1 <= rows[q, 21] and rows[q, 19] <= x2 <= rows[q, 22]):
+        return 0  # outside the triangle's box grown by edge_tol (ExactSegments, Notes 2.)
     near = False
     for e in range(3):
         o = 5 + 4 * e
         dist = rows[q, o] * x0 + rows[q, o + 1] * x1 + rows[q, o + 2] * x2 - rows[q, o + 3]
-        if dist < -edge_tol:
+        if not dist >= -edge_tol:
             return 0
         if dist <= tl:
             near = True

@@ -43,9 +43,10 @@ MAX_DEPTH = 48
 """Depth at which a node becomes a leaf whatever it holds (the walk's stack holds at most
 ``MAX_DEPTH + 1`` nodes)."""
 
-ROW = 17
+ROW = 23
 """Floats per triangle in :attr:`SegmentBVH.rows`: the unit normal (3), the plane offset,
-the plane tolerance, then for each of the three edges its inward unit normal (3) and offset."""
+the plane tolerance, for each of the three edges its inward unit normal (3) and offset, then
+the box a crossing point must lie in (``ExactSegments.box_lo`` (3), ``box_hi`` (3))."""
 
 
 @dataclass(frozen=True)
@@ -62,9 +63,10 @@ class SegmentBVH:
         An inner node's right child (its left child is the next node); -1 for a leaf.
     triangle : (t,) int64
         The scene triangle of each row, in leaf order.
-    rows : (t, 17) float64
-        Per row: normal, offset, plane tolerance, and the three edges' inward normals and
-        offsets (:data:`ROW`), as in :class:`~wavepaths.raycast.numpy_caster.ExactSegments`.
+    rows : (t, 23) float64
+        Per row: normal, offset, plane tolerance, the three edges' inward normals and
+        offsets, and the crossing point's box (:data:`ROW`), as in
+        :class:`~wavepaths.raycast.numpy_caster.ExactSegments`.
     edge_tol : float [m]
         ``ExactSegments.edge_tol``.
     """
@@ -129,7 +131,8 @@ def build_segment_bvh(exact: "ExactSegments", leaf_size: int = 8) -> SegmentBVH:
         node(np.arange(len(lo)), 0)
     tri = np.asarray(order, dtype=np.int64)
     edges = np.concatenate([exact.inward[tri], exact.inward_offset[tri][:, :, None]], axis=2).reshape(len(tri), 12)
-    rows = np.concatenate([exact.normal[tri], exact.offset[tri, None], exact.tol[tri, None], edges], axis=1)
+    rows = np.concatenate([exact.normal[tri], exact.offset[tri, None], exact.tol[tri, None], edges, exact.box_lo[tri],
+                           exact.box_hi[tri]], axis=1)
     return SegmentBVH(np.asarray(box, dtype=np.float64).reshape(-1, 6), np.asarray(first, np.int64),
                       np.asarray(count, np.int64), np.asarray(right, np.int64), tri,
                       np.ascontiguousarray(rows, dtype=np.float64), float(exact.edge_tol))

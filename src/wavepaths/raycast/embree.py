@@ -290,7 +290,7 @@ class EmbreeRayCaster:
             hit = prim >= 0
             seg, p = sel[rows[hit]], prim[hit].astype(np.int64)
             verdict = K.confirm_hits(A, B, seg, p, second, ex.normal, ex.offset, ex.tol, ex.inward,
-                                     ex.inward_offset, ex.edge_tol, reached[hit])
+                                     ex.inward_offset, ex.edge_tol, ex.box_lo, ex.box_hi, reached[hit])
             blocked[seg[verdict == 1]] = True
             uncertain[seg[verdict == 2]] = True
             near = verdict == 3  # a crossing next to a face's edge: the numpy test, with its graze check
@@ -332,7 +332,7 @@ class EmbreeRayCaster:
             return blocked
         verdict, face, rays = self._kernels.occluded_direct(
             A, B, sel, self._lo, self._hi, self._reach_tol, np.uint64(d.intersect), np.uint64(d.scene), ex.normal,
-            ex.offset, ex.tol, ex.inward, ex.inward_offset, ex.edge_tol)
+            ex.offset, ex.tol, ex.inward, ex.inward_offset, ex.edge_tol, ex.box_lo, ex.box_hi)
         with _COUNT_LOCK:
             self._rays += int(rays)
         blocked[sel[verdict == 1]] = True

@@ -22,6 +22,12 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
 
 
+def _dot3(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(k,) row-wise dot products of (k, 3) arrays, summed ``(u0 v0 + u1 v1) + u2 v2`` (the
+    compiled kernels' order; ``np.einsum`` may add in another)."""
+    return (u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1]) + u[:, 2] * v[:, 2]
+
+
 class ExactSegments:
     """Float64 segment-versus-triangle tests of one scene (coordinates relative to its centre).
 
@@ -43,7 +49,15 @@ class ExactSegments:
        search puts reflection points on the polygon's plane).
     2. The crossing point must lie in the closed triangle: its distance inside each edge
        ``>= -edge_tol`` (``edge_tol`` = 1e-12 of the diagonal: rounding of the recentred
-       coordinates, so that no segment leaks between two triangles of one wall).
+       coordinates, so that no segment leaks between two triangles of one wall), and in the
+       triangle's bounding box grown by ``edge_tol`` (:attr:`box_lo`, :attr:`box_hi`): the
+       three edge conditions alone reach ``edge_tol / sin(a / 2)`` beyond a corner of angle
+       ``a``, past the padded boxes through which the indexes find a segment's triangles
+       (:attr:`pad`), so a crossing there would count for one index and not for another.
+    The sums are written out in one order, ``(x0 y0 + x1 y1) + x2 y2``, the compiled
+    kernels' (:mod:`wavepaths.raycast._numba`): a crossing point nearly parallel to the
+    plane moves by far more than rounding with one ulp of ``s_a``, and the verdicts must
+    be the same bit for bit.
     3. A crossing next to an edge (within the plane tolerance) that lies on the closure of
        a triangle whose plane contains the segment, around that edge's corners, is a graze
        along that face's boundary (a segment running over a roof, in its plane, that
@@ -70,6 +84,8 @@ class ExactSegments:
         self.tol = plane_tolerance(scene) + dev  # (f,) per-triangle plane tolerance [m]
         self.diagonal = float(scene.diagonal)
         self.edge_tol = 1e-12 * scene.diagonal
+        self.box_lo = self.lo - self.edge_tol  # (f, 3): the crossing point's box (Notes, 2.)
+        self.box_hi = self.hi + self.edge_tol
         # triangles around each vertex (CSR), for grazes along a coplanar face's boundary
         self.triangles = scene.triangles
         flat = scene.triangles.ravel()
@@ -79,7 +95,7 @@ class ExactSegments:
     # ---- pairwise ------------------------------------------------------------------------
     def in_plane(self, p: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """(k,) bool: the point ``p[i]`` (recentred) lies in the plane of ``tri[i]`` (within tol)."""
-        return np.abs(np.einsum("ij,ij->i", p, self.normal[tri]) - self.offset[tri]) <= self.tol[tri]
+        return np.abs(_dot3(p, self.normal[tri]) - self.offset[tri]) <= self.tol[tri]
 
     def crosses(self, a: np.ndarray, b: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """(k,) bool: the segment ``a[i] -> b[i]`` (recentred, canonical) passes through triangle ``tri[i]``."""
@@ -88,8 +104,8 @@ class ExactSegments:
         if k == 0:
             return out
         n, d = self.normal[tri], self.offset[tri]
-        sa = np.einsum("ij,ij->i", a, n) - d
-        sb = np.einsum("ij,ij->i", b, n) - d
+        sa = _dot3(a, n) - d
+        sb = _dot3(b, n) - d
         tol = self.tol[tri]
         strict = ((sa > tol) & (sb < -tol)) | ((sa < -tol) & (sb > tol))
         rows = np.nonzero(strict)[0]
@@ -98,8 +114,11 @@ class ExactSegments:
         t = tri[rows]
         w = sa[rows] / (sa[rows] - sb[rows])
         x = a[rows] + w[:, None] * (b[rows] - a[rows])
-        dist = np.einsum("kij,kj->ki", self.inward[t], x) - self.inward_offset[t]  # (m, 3) inside each edge
+        g = self.inward[t]  # (m, 3 edges, 3)
+        dist = ((g[:, :, 0] * x[:, 0, None] + g[:, :, 1] * x[:, 1, None]) + g[:, :, 2] * x[:, 2, None]
+                - self.inward_offset[t])  # (m, 3) inside each edge
         inside = (dist >= -self.edge_tol).all(axis=1)
+        inside &= ((x >= self.box_lo[t]) & (x <= self.box_hi[t])).all(axis=1)
         near = inside[:, None] & (dist <= tol[rows, None])
         if near.any():
             inside &= ~self._grazes_coplanar_face(a[rows], b[rows], x, t, near)
