@@ -69,6 +69,10 @@ class SegmentBVH:
         :class:`~wavepaths.raycast.numpy_caster.ExactSegments`.
     edge_tol : float [m]
         ``ExactSegments.edge_tol``.
+    slack : float [m]
+        Half of what the boxes' padding (``ExactSegments.pad``) adds beyond the box a crossing
+        point must lie in (``edge_tol``): the slabs' rounding this leaves room for; the walk
+        grows the boxes for segments whose coordinates make it larger.
     """
 
     box: np.ndarray
@@ -78,6 +82,7 @@ class SegmentBVH:
     triangle: np.ndarray
     rows: np.ndarray
     edge_tol: float
+    slack: float
 
     @property
     def depth(self) -> int:
@@ -135,7 +140,8 @@ def build_segment_bvh(exact: "ExactSegments", leaf_size: int = 8) -> SegmentBVH:
                            exact.box_hi[tri]], axis=1)
     return SegmentBVH(np.asarray(box, dtype=np.float64).reshape(-1, 6), np.asarray(first, np.int64),
                       np.asarray(count, np.int64), np.asarray(right, np.int64), tri,
-                      np.ascontiguousarray(rows, dtype=np.float64), float(exact.edge_tol))
+                      np.ascontiguousarray(rows, dtype=np.float64), float(exact.edge_tol),
+                      0.5 * float(exact.pad - exact.edge_tol))
 
 
 __all__ = ["BVH_MAX_TRIANGLES", "SegmentBVH", "build_segment_bvh"]

@@ -313,7 +313,8 @@ class EmbreeRayCaster:
         sel = np.nonzero(live)[0]
         if len(sel) == 0:
             return blocked
-        verdict, row = self._kernels.occluded_bvh(A, B, sel, t.box, t.first, t.count, t.right, t.rows, t.edge_tol)
+        verdict, row = self._kernels.occluded_bvh(A, B, sel, t.box, t.first, t.count, t.right, t.rows, t.edge_tol,
+                                                  t.slack)
         blocked[sel[verdict == 1]] = True
         near = (verdict == 3) & (row >= 0)  # a crossing next to a triangle's edge, as the half-rays' 3
         return self._decide_edges(A, B, sel[near], t.triangle[row[near]], sel[(verdict == 3) & (row < 0)], blocked)
