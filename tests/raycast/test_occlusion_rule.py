@@ -173,3 +173,24 @@ def test_the_rule_survives_a_move_to_1e6_m_and_a_rotation(rng):
     # (1e-14 of 2e6 m) absorbs the rounding of the moved coordinates (4e-10 m)
     np.testing.assert_array_equal(here, moved)
     assert 0.1 < here.mean() < 0.9
+
+
+def test_the_graze_check_gives_the_same_answers_in_chunks(rng):
+    """The graze check along a coplanar face's boundary takes its (crossing, neighbour) pairs
+    in chunks (a vertex shared by thousands of triangles would hold them all at once): the
+    same answers with chunks of one corner as with one chunk, with grazes present."""
+    from wavepaths.raycast.numpy_caster import ExactSegments
+
+    scene = load_scene("street_canyon")
+    ex = ExactSegments(scene)
+    T = scene.vertices[scene.triangles] - scene.center
+    m = 3000
+    t = rng.integers(0, len(T), m)
+    near = rng.uniform(size=(m, 3)) < 0.4
+    a = T[t, 0] + 2.0 * (T[t, 1] - T[t, 0])  # in the plane of triangle t: grazes its neighbours in that plane
+    b = T[t, 2] - 0.5 * (T[t, 1] - T[t, 2])
+    x = T[t, 1] + 1e-15
+    whole = ex._grazes_coplanar_face(a, b, x, t, near)
+    assert whole.sum() > 100
+    for budget in (1, 5, 33):
+        np.testing.assert_array_equal(ex._grazes_coplanar_face(a, b, x, t, near, budget=budget), whole)

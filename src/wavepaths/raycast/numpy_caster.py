@@ -130,24 +130,33 @@ class ExactSegments:
         dist = np.einsum("kij,kj->ki", self.inward[tri], x) - self.inward_offset[tri]
         return (dist >= -self.tol[tri, None]).all(axis=1)
 
-    def _grazes_coplanar_face(self, a, b, x, t, near) -> np.ndarray:
+    def _grazes_coplanar_face(self, a, b, x, t, near, budget: int = 1 << 22) -> np.ndarray:
         """(m,) bool: the crossing ``x``, next to an edge of ``t``, lies on the closure of a
-        triangle around that edge's corners whose plane contains the segment."""
+        triangle around that edge's corners whose plane contains the segment.
+
+        The (crossing, triangle around a corner) pairs are taken about ``budget`` at a time
+        (a vertex shared by thousands of triangles, e.g. a scene of stacked copies, would
+        otherwise hold them all at once)."""
         r, side = np.nonzero(near)
         r = np.concatenate([r, r])
         corner = self.triangles[t[r], np.concatenate([side, (side + 1) % 3])]
         start = self.vertex_ptr[corner]
         count = self.vertex_ptr[corner + 1] - start
-        rr = np.repeat(r, count)
-        offs = np.arange(len(rr)) - np.repeat(np.cumsum(count) - count, count)
-        other = self.vertex_tris[np.repeat(start, count) + offs]
-        keep = other != t[rr]
-        rr, other = rr[keep], other[keep]
-        graze = self.in_plane(a[rr], other) & self.in_plane(b[rr], other)
-        rr, other = rr[graze], other[graze]
-        graze = self._inside(x[rr], other)
         out = np.zeros(len(t), dtype=bool)
-        out[rr[graze]] = True
+        ends = np.cumsum(count)
+        lo = 0
+        while lo < len(r):  # chunks of whole corners, at least one, about `budget` pairs each
+            hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + budget, side="right")))
+            rr = np.repeat(r[lo:hi], count[lo:hi])
+            c = count[lo:hi]
+            offs = np.arange(len(rr)) - np.repeat(np.cumsum(c) - c, c)
+            other = self.vertex_tris[np.repeat(start[lo:hi], c) + offs]
+            keep = other != t[rr]
+            rr, other = rr[keep], other[keep]
+            graze = self.in_plane(a[rr], other) & self.in_plane(b[rr], other)
+            rr, other = rr[graze], other[graze]
+            out[rr[self._inside(x[rr], other)]] = True
+            lo = hi
         return out
 
     # ---- against the whole scene ---------------------------------------------------------
