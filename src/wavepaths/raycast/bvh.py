@@ -12,8 +12,10 @@ segment: the legs of the street canyon's R2+D1 map (74 triangles) 76-83 ns again
 ``etoile_crop``'s path legs (948 triangles) 180 ns against 278 ns, munich's path legs
 (38,936 triangles) 285 ns against 370 ns; on random long segments across ``etoile`` (13,098
 triangles) and munich Embree's wider tree is faster (331 ns against 451 ns, 458 ns against
-633 ns), so the caster builds this tree by default only up to :data:`BVH_MAX_TRIANGLES`
-triangles (docs/search.md).
+633 ns), but the tree decides every segment by the float64 rule where Embree's float32 rays
+miss a few faces crossed next to their edges (munich's path legs: 94 of 353,245), so the
+caster builds it by default up to :data:`BVH_MAX_TRIANGLES` triangles, which holds both
+built-in city scenes (docs/search.md).
 
 The tree: binary, its nodes in depth-first order (a node's left child follows it), each
 with the float64 box of its triangles' boxes padded by ``ExactSegments.pad`` (so that a
@@ -34,10 +36,12 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from .numpy_caster import ExactSegments
 
-BVH_MAX_TRIANGLES = 2048
-"""The largest scene (in triangles) for which :class:`~wavepaths.raycast.embree.EmbreeRayCaster`
-builds the tree by default (``bvh=None``); measured: faster than Embree at 948 triangles,
-slower at 13,098 (random segments across ``etoile``)."""
+BVH_MAX_TRIANGLES = 1 << 17
+"""The largest scene (in triangles, 131,072) for which
+:class:`~wavepaths.raycast.embree.EmbreeRayCaster` builds the tree by default (``bvh=None``):
+exact occlusion on every scene up to munich's size and beyond (38,936 triangles: the tree
+builds in 1.3 s, in numpy); larger scenes keep Embree's float32 casts, whose tree builds
+faster and walks long segments faster."""
 
 MAX_DEPTH = 48
 """Depth at which a node becomes a leaf whatever it holds (the walk's stack holds at most
