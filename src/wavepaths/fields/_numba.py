@@ -104,6 +104,14 @@ def _cot_f(addr, eps, n, kl, root_2kl):
 @numba.njit(cache=True, nogil=True)
 def luebbers(addr, phi, phi_prime, beta_0, n, k, L, r0_s, r0_h, rn_s, rn_h, floor):
     """(D_s, D_h) of :func:`wavepaths.em.utd.luebbers_coefficients` at one point."""
+    base, d4, d3 = luebbers_terms(addr, phi, phi_prime, beta_0, n, k, L, floor)
+    return base + r0_s * d4 + rn_s * d3, base + r0_h * d4 + rn_h * d3
+
+
+@numba.njit(cache=True, nogil=True)
+def luebbers_terms(addr, phi, phi_prime, beta_0, n, k, L, floor):
+    """``(D1 + D2, D4, D3)`` of :func:`wavepaths.em.utd.luebbers_coefficients` (the four terms
+    with their prefactor) at one point."""
     sb = max(abs(math.sin(beta_0)), floor)
     pref = -_E_MPI4 / (2.0 * n * math.sqrt(2.0 * math.pi * k) * sb)
     two_pi_n = 2.0 * math.pi * n
@@ -116,8 +124,7 @@ def luebbers(addr, phi, phi_prime, beta_0, n, k, L, r0_s, r0_h, rn_s, rn_h, floo
     t2 = _cot_f(addr, (math.pi - bm) + two_pi_n * np.rint((bm - math.pi) / two_pi_n), n, kl, root_2kl)
     t3 = _cot_f(addr, (math.pi + bp) - two_pi_n * np.rint((bp + math.pi) / two_pi_n), n, kl, root_2kl)
     t4 = _cot_f(addr, (math.pi - bp) + two_pi_n * np.rint((bp - math.pi) / two_pi_n), n, kl, root_2kl)
-    base = t1 + t2
-    return pref * (base + r0_s * t4 + rn_s * t3), pref * (base + r0_h * t4 + rn_h * t3)
+    return pref * (t1 + t2), pref * t4, pref * t3
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -217,6 +224,30 @@ def _perp_unit(a0, a1, a2, b0, b1, b2, f0, f1, f2):
     return f0, f1, f2
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _edge_reflection(r_te, r_tm, ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, bi0, bi1, bi2, fi0, fi1, fi2, bo0, bo1, bo2,
+                     fo0, fo1, fo2):
+    # wavepaths.em.utd.edge_fixed_reflection at one point, with the edge-fixed bases (b0', phi')
+    # of k_in and (b0, phi) of k_out given: G = -B_out^T R B_in, its four entries (rows b0, phi;
+    # columns b0', phi'), the same expressions. The TE direction s = unit(k_in x n), or where
+    # k_in runs along n, the reflection kernel's fallback unit(n x z) (or x)
+    c0, c1, c2 = ki1 * n2 - ki2 * n1, ki2 * n0 - ki0 * n2, ki0 * n1 - ki1 * n0
+    m = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    if m > 1e-12:
+        s0, s1, s2 = c0 / m, c1 / m, c2 / m
+    else:
+        s0, s1, s2 = _perp_unit(n0, n1, n2, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
+    pi0, pi1, pi2 = s1 * ki2 - s2 * ki1, s2 * ki0 - s0 * ki2, s0 * ki1 - s1 * ki0
+    pr0, pr1, pr2 = s1 * ko2 - s2 * ko1, s2 * ko0 - s0 * ko2, s0 * ko1 - s1 * ko0
+    # u.s, u.p_r for the output vectors u; s.v, p_i.v for the input vectors v
+    bs, bp = (bo0 * s0 + bo1 * s1) + bo2 * s2, (bo0 * pr0 + bo1 * pr1) + bo2 * pr2
+    fs, fp = (fo0 * s0 + fo1 * s1) + fo2 * s2, (fo0 * pr0 + fo1 * pr1) + fo2 * pr2
+    sb, pb = (s0 * bi0 + s1 * bi1) + s2 * bi2, (pi0 * bi0 + pi1 * bi1) + pi2 * bi2
+    sf, pf = (s0 * fi0 + s1 * fi1) + s2 * fi2, (pi0 * fi0 + pi1 * fi1) + pi2 * fi2
+    return (-(r_te * (bs * sb) + r_tm * (bp * pb)), -(r_te * (bs * sf) + r_tm * (bp * pf)),
+            -(r_te * (fs * sb) + r_tm * (fp * pb)), -(r_te * (fs * sf) + r_tm * (fp * pf)))
+
+
 @numba.njit(cache=True, nogil=True)
 def reflect(E, k_in, k_out, normal, material, kinds, etas, thick, slab):
     """:func:`wavepaths.fields.chain._apply_reflection`, in place on ``E`` (k, P, 3).
@@ -248,54 +279,82 @@ def _reflect_core(E, r, ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, m, kinds, etas
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
-                  kinds, etas, thick, slab):
+def _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0, n, L, k, floor, mat_0,
+                  mat_n, kinds, etas, thick, slab):
     _diffract_core(addr, E, r, e[r, 0], e[r, 1], e[r, 2], s_in[r, 0], s_in[r, 1], s_in[r, 2], s_out[r, 0],
-                   s_out[r, 1], s_out[r, 2], x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2], phi[r],
-                   phi_prime[r], beta_0[r], n[r], L[r], k, floor, mat_0[r], mat_n[r], kinds, etas, thick, slab)
+                   s_out[r, 1], s_out[r, 2], x_fallback[r, 0], x_fallback[r, 1], x_fallback[r, 2],
+                   (y_face[r, 0], y_face[r, 1], y_face[r, 2]), phi[r], phi_prime[r], beta_0[r], n[r], L[r], k, floor,
+                   mat_0[r], mat_n[r], kinds, etas, thick, slab)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, phi, phi_prime, b0, nr, L, k, floor,
+def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y, phi, phi_prime, b0, nr, L, k, floor,
                    m0, mn, kinds, etas, thick, slab):
     """One row of :func:`diffract`: edge ``e``, directions ``s_in`` = ``a``, ``s_out`` = ``o``,
-    fallback ``f`` (the 0-face direction), the UTD angles, ``L``, the faces' materials."""
+    fallback ``f`` (the 0-face direction), ``y`` the n-face direction (a 3-tuple), the UTD angles, ``L``,
+    the faces' materials. The Jones matrix is
+    :func:`wavepaths.em.utd.diffraction_jones_matrices`' with the faces' reflections of
+    :func:`wavepaths.em.utd.wedge_reflection_matrices` (:func:`_edge_reflection`)."""
     sb = abs(math.sin(b0))
     r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime)))
     rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi)))
-    d_s, d_h = luebbers(addr, phi, phi_prime, b0, nr, k, L, r0_s, r0_h, rn_s, rn_h, floor)
+    base, d4, d3 = luebbers_terms(addr, phi, phi_prime, b0, nr, k, L, floor)
     pi0, pi1, pi2 = _perp_unit(a0, a1, a2, e0, e1, e2, f0, f1, f2)
     bi0, bi1, bi2 = a1 * pi2 - a2 * pi1, a2 * pi0 - a0 * pi2, a0 * pi1 - a1 * pi0
     po0, po1, po2 = _perp_unit(e0, e1, e2, o0, o1, o2, f0, f1, f2)
     bo0, bo1, bo2 = o1 * po2 - o2 * po1, o2 * po0 - o0 * po2, o0 * po1 - o1 * po0
+    # the faces' normals (chain._apply_diffraction: _perp_unit(e, face direction, 0-face direction))
+    n00, n01, n02 = _perp_unit(e0, e1, e2, f0, f1, f2, f0, f1, f2)
+    nn0, nn1, nn2 = _perp_unit(e0, e1, e2, y[0], y[1], y[2], f0, f1, f2)
+    # G0: the 0-face reflecting s_in into its mirror m (input basis: s_in's own)
+    c = (a0 * n00 + a1 * n01) + a2 * n02
+    m0_, m1_, m2_ = a0 - 2.0 * c * n00, a1 - 2.0 * c * n01, a2 - 2.0 * c * n02
+    q0, q1, q2 = _perp_unit(e0, e1, e2, m0_, m1_, m2_, f0, f1, f2)
+    g00, g01, g10, g11 = _edge_reflection(r0_s, r0_h, a0, a1, a2, m0_, m1_, m2_, n00, n01, n02, bi0, bi1, bi2, pi0,
+                                          pi1, pi2, m1_ * q2 - m2_ * q1, m2_ * q0 - m0_ * q2, m0_ * q1 - m1_ * q0, q0,
+                                          q1, q2)
+    # Gn: the n-face reflecting the mirror m of s_out into s_out (output basis: s_out's own)
+    c = (o0 * nn0 + o1 * nn1) + o2 * nn2
+    m0_, m1_, m2_ = o0 - 2.0 * c * nn0, o1 - 2.0 * c * nn1, o2 - 2.0 * c * nn2
+    q0, q1, q2 = _perp_unit(m0_, m1_, m2_, e0, e1, e2, f0, f1, f2)
+    h00, h01, h10, h11 = _edge_reflection(rn_s, rn_h, m0_, m1_, m2_, o0, o1, o2, nn0, nn1, nn2, m1_ * q2 - m2_ * q1,
+                                          m2_ * q0 - m0_ * q2, m0_ * q1 - m1_ * q0, q0, q1, q2, bo0, bo1, bo2, po0,
+                                          po1, po2)
+    # J = -[(D1 + D2) I + D4 G0 + D3 Gn]
+    j00 = -((d4 * g00 + d3 * h00) + base)
+    j01 = -(d4 * g01 + d3 * h01)
+    j10 = -(d4 * g10 + d3 * h10)
+    j11 = -((d4 * g11 + d3 * h11) + base)
     for p in range(E.shape[1]):
         x0, x1, x2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
-        ob = -d_s * (x0 * bi0 + x1 * bi1 + x2 * bi2)
-        op = -d_h * (x0 * pi0 + x1 * pi1 + x2 * pi2)
+        cb = x0 * bi0 + x1 * bi1 + x2 * bi2
+        cp = x0 * pi0 + x1 * pi1 + x2 * pi2
+        ob = j00 * cb + j01 * cp
+        op = j10 * cb + j11 * cp
         E[r, p, 0] = ob * bo0 + op * po0
         E[r, p, 1] = ob * bo1 + op * po1
         E[r, p, 2] = ob * bo2 + op * po2
 
 
 @numba.njit(cache=True, nogil=True)
-def diffract(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
+def diffract(addr, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
              kinds, etas, thick, slab):
     """:func:`wavepaths.fields.chain._apply_diffraction` after the wedge geometry, model
     ``"utd"`` (Luebbers' face coefficients at their angles,
     :func:`wavepaths.em.utd.luebbers_face_coefficients`), in place on ``E`` (k, P, 3).
     """
     for r in range(E.shape[0]):
-        _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
-                      kinds, etas, thick, slab)
+        _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0, n, L, k, floor, mat_0,
+                      mat_n, kinds, etas, thick, slab)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def diffract_parallel(addr, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
-                      kinds, etas, thick, slab):
+def diffract_parallel(addr, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0, n, L, k, floor, mat_0,
+                      mat_n, kinds, etas, thick, slab):
     """:func:`diffract` with the rows on numba's threads (each row is independent)."""
     for r in numba.prange(E.shape[0]):
-        _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, phi, phi_prime, beta_0, n, L, k, floor, mat_0, mat_n,
-                      kinds, etas, thick, slab)
+        _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0, n, L, k, floor, mat_0,
+                      mat_n, kinds, etas, thick, slab)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -416,8 +475,9 @@ def _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, pri
                 deferred[r] = True
                 return
             _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, face_direction[f0, 0],
-                           face_direction[f0, 1], face_direction[f0, 2], ph, pp, b0, nn, L, k, floor, face_material[f0],
-                           face_material[fn], kinds, etas, thick, slab)
+                           face_direction[f0, 1], face_direction[f0, 2],
+                           (face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2]), ph, pp, b0, nn, L, k,
+                           floor, face_material[f0], face_material[fn], kinds, etas, thick, slab)
             spreading[r] = 1.0 / math.sqrt(s_before * s_after * (s_before + s_after))
 
 

@@ -10,8 +10,11 @@ direction, which avoids any basis bookkeeping between interactions:
   (ITU-R P.2040 coefficients, conventions in :mod:`wavepaths.em.fresnel`);
 * diffraction: in KP's edge-fixed bases ``phi' = unit(s' x e)``, ``b0' = s' x phi'``,
   ``phi = unit(e x s)``, ``b0 = s x phi`` the 2x2 matrix of
-  :func:`wavepaths.em.utd.diffraction_jones` maps ``(E.b0', E.phi')`` to the
-  ``b0``, ``phi`` components of the diffracted field;
+  :func:`wavepaths.em.utd.diffraction_jones_matrices` (UTD or GTD, Luebbers' face
+  coefficients as the faces' reflections in these bases,
+  :func:`wavepaths.em.utd.wedge_reflection_matrices`) or of
+  :func:`wavepaths.em.utd.diffraction_jones` (Sionna RT's form) maps ``(E.b0', E.phi')`` to
+  the ``b0``, ``phi`` components of the diffracted field;
 * receiver: ``V = C_rx^* . E`` with ``C_rx`` the receive pattern toward the arriving
   wave (seen from the receiver).
 
@@ -35,7 +38,12 @@ from ..em.antennas import antenna_field_vectors
 from ..em.fresnel import reflection_coefficients
 from ..em.polarization import spherical_unit_vectors
 from ..em.sionna_compat import sionna_face_coefficients
-from ..em.utd import diffraction_jones, luebbers_face_coefficients
+from ..em.utd import (
+    diffraction_jones,
+    diffraction_jones_matrices,
+    luebbers_face_coefficients,
+    wedge_reflection_matrices,
+)
 from ..search.paths import InteractionType, Paths
 from . import compiled as _compiled
 from .config import FieldConfig
@@ -235,6 +243,11 @@ def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, 
     if cfg.model == "utd" and cfg.compat == "none" and _compiled.use_compiled(cfg):
         return _diffract_compiled(scene, cfg, E, g, L, mat0, matn)
     jones = np.empty((len(rows), 2, 2), complex)
+    x_fallback = dih.face_direction[g["face_0"]]
+    if cfg.compat != "sionna":
+        # the faces' normals (any sign: a reflection does not depend on it)
+        normal_0 = _perp_unit(e, x_fallback, x_fallback)
+        normal_n = _perp_unit(e, dih.face_direction[g["face_n"]], x_fallback)
     for m0, mn in set(zip(mat0.tolist(), matn.tolist())):
         sel = (mat0 == m0) & (matn == mn)
         args = (g["phi"][sel], g["phi_prime"][sel], g["beta_0"][sel], g["n"][sel])
@@ -242,10 +255,13 @@ def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, 
             r = sionna_face_coefficients(scene.materials[m0], cfg.frequency_hz, args[1], args[2], args[3])
             jones[sel] = diffraction_jones(*args, k, L[sel], "sionna", *r)
         else:
+            # Luebbers' face coefficients as reflections in the edge-fixed bases (full 2x2 at
+            # oblique incidence: the total field stays continuous at the reflection boundaries)
             r = luebbers_face_coefficients(scene.materials[m0], scene.materials[mn], cfg.frequency_hz, args[0],
                                            args[1], args[3], cfg.reflection_model, beta_0=args[2])
-            jones[sel] = diffraction_jones(*args, k, L[sel], cfg.model, *r)
-    x_fallback = dih.face_direction[g["face_0"]]
+            g0, gn = wedge_reflection_matrices(*r, e[sel], s_in[sel], s_out[sel], normal_0[sel], normal_n[sel],
+                                               x_fallback[sel])
+            jones[sel] = diffraction_jones_matrices(*args, k, L[sel], cfg.model, g0, gn)
     phi_in = _perp_unit(s_in, e, x_fallback)
     b_in = np.cross(s_in, phi_in)
     phi_out = _perp_unit(e, s_out, x_fallback)
@@ -269,7 +285,7 @@ def _diffract_compiled(scene: "Scene", cfg: FieldConfig, E, g: dict, L, mat0, ma
     tables = _compiled.material_tables(scene, cfg, np.concatenate([mat0, matn]))
     kernel = _numba.diffract_parallel if _compiled.parallel(len(out)) else _numba.diffract
     kernel(np.uint64(_compiled.erfcx_address()), out, c(g["e"]), c(g["s_in"]), c(g["s_out"]),
-           c(scene.dihedra.face_direction[g["face_0"]]), c(g["phi"], dtype=float), c(g["phi_prime"], dtype=float),
+           c(scene.dihedra.face_direction[g["face_0"]]), c(scene.dihedra.face_direction[g["face_n"]]), c(g["phi"], dtype=float), c(g["phi_prime"], dtype=float),
            c(g["beta_0"], dtype=float), c(g["n"], dtype=float), c(L, dtype=float), float(cfg.wavenumber),
            SIN_BETA_0_FLOOR, mat0, matn, *tables, cfg.reflection_model == "slab")
     return out

@@ -135,7 +135,7 @@ def warm_up() -> bool:
 
     z, v = np.zeros(1), np.array([[0.0, 0.0, 1.0]])
     for slab in (True, False):
-        _numba.diffract_parallel(np.uint64(erfcx_address()), np.ones((1, 1, 3), np.complex128), v, v, v, v, z, z,
+        _numba.diffract_parallel(np.uint64(erfcx_address()), np.ones((1, 1, 3), np.complex128), v, v, v, v, v, z, z,
                                  z + 1.0, z + 1.5, z + 1.0, 1.0, 1e-6, np.zeros(1, np.int64), np.zeros(1, np.int64),
                                  np.ones(1, np.int64), np.ones(1, np.complex128), z, slab)
     return True
