@@ -78,6 +78,21 @@ def test_fresnel_kernel_matches_p2040_reference(material, slab):
     assert np.all(_close(got[:, 1], ref.r_tm, 1e-13)), material.name
 
 
+@pytest.mark.parametrize("c_loss,cos", [(1e-300, 0.0), (1e-190, 1e-160), (1e-200, 0.3)])
+@pytest.mark.parametrize("slab", [False, True])
+def test_fresnel_kernel_on_a_near_vacuum_matches_the_reference(c_loss, cos, slab):
+    """|(eta - 1) + cos^2| below 1e-154: the kernel's square root must not square the
+    modulus into an underflow (it divided by zero, or gave r = 0 for -1)."""
+    from wavepaths.fields import _numba
+
+    f = 3.5e9
+    mat = Material("near_vacuum", "custom", a=1.0, c=c_loss, thickness_m=0.1)
+    eta = complex(relative_permittivity(mat, f))
+    ref = reflection_coefficients(mat, f, np.array([cos]), "slab" if slab else "half_space")
+    got = _numba.fresnel(_numba.KIND_DIELECTRIC, eta, 0.1 * f / 299792458.0, slab, cos)
+    np.testing.assert_allclose(got, [ref.r_te[0], ref.r_tm[0]], rtol=1e-12, atol=1e-300)
+
+
 def test_luebbers_kernel_matches_the_reference_on_boundaries_and_both_branches():
     from wavepaths.fields import _numba
 

@@ -133,7 +133,9 @@ def _csqrt(a, b):
     # signed zeros included), as (re, im)
     if a == 0.0 and b == 0.0:
         return 0.0, b
-    m = math.sqrt(a * a + b * b)  # |a + jb| (no overflow: |eta - 1 + c^2| is far below 1e150)
+    m = math.sqrt(a * a + b * b)  # |a + jb|
+    if not 1e-150 < m < 1e150:  # the squares under- or overflow (a near-vacuum or a huge eta): libm's careful form
+        m = math.hypot(a, b)
     if a >= 0.0:
         t = math.sqrt(0.5 * (m + a))
         return t, 0.5 * b / t
