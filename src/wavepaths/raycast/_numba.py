@@ -345,9 +345,9 @@ def occluded_bvh(A, B, sel, box, first, count, right, rows, edge_tol, slack):
 
     The boxes are met by slabs computed in float64, whose rounding grows with the ends'
     distance from the scene's centre: where ``4e-15`` of the sum of the segment's coordinates'
-    magnitudes (at least its largest) exceeds ``slack`` (by how much the boxes' padding exceeds the crossing point's box,
-    ``SegmentBVH.slack``), each box is grown by it, so that a segment with an end far away
-    still meets the boxes of the triangles it crosses.
+    magnitudes (at least its largest) exceeds ``slack`` (``SegmentBVH.slack``: what the
+    boxes' padding leaves beyond the crossing point's box), each box is grown by it, so that
+    a segment with an end far away still meets the boxes of the triangles it crosses.
 
     Returns ``(verdict, row)``: (k,) int8, 0 clear, 1 blocked, 3 undecided here: a crossing
     next to a triangle's edge (within its plane tolerance, where crosses() also checks for a
@@ -452,10 +452,9 @@ def _row_crossing(rows, q, a0, a1, a2, b0, b1, b2, edge_tol):
             return 0
         if dist <= tl:
             near = True
-    # and within the triangle's box grown by edge_tol (ExactSegments, Notes 2.): tested last,
-    # as it rejects only next to a sharp corner
-    # (one expression of non-short-circuit ands: the chained comparisons' branches made the
-    # walk 20-30 % slower, although this line runs only for crossings)
+    # and within the triangle's box grown by edge_tol (ExactSegments, Notes 2.): tested last, as
+    # it rejects only next to a sharp corner, in one expression of non-short-circuit ands (the
+    # chained comparisons' branches made the walk 20-30 % slower, though it runs for crossings only)
     if not ((x0 >= rows[q, 17]) & (x0 <= rows[q, 20]) & (x1 >= rows[q, 18]) & (x1 <= rows[q, 21])
             & (x2 >= rows[q, 19]) & (x2 <= rows[q, 22])):
         return 0

@@ -54,14 +54,15 @@ class ExactSegments:
        three edge conditions alone reach ``edge_tol / sin(a / 2)`` beyond a corner of angle
        ``a``, past the padded boxes through which the indexes find a segment's triangles
        (:attr:`pad`), so a crossing there would count for one index and not for another.
-    The sums are written out in one order, ``(x0 y0 + x1 y1) + x2 y2``, the compiled
-    kernels' (:mod:`wavepaths.raycast._numba`): a crossing point nearly parallel to the
-    plane moves by far more than rounding with one ulp of ``s_a``, and the verdicts must
-    be the same bit for bit.
     3. A crossing next to an edge (within the plane tolerance) that lies on the closure of
        a triangle whose plane contains the segment, around that edge's corners, is a graze
        along that face's boundary (a segment running over a roof, in its plane, that
        touches the top edge or a top corner of a wall below it), not a crossing.
+
+    The sums are written out in one order, ``(x0 y0 + x1 y1) + x2 y2``, the compiled
+    kernels' (:mod:`wavepaths.raycast._numba`): for a segment nearly parallel to the plane
+    the crossing point moves by far more than rounding with one ulp of ``s_a``, and the
+    verdicts must be the same bit for bit.
     """
 
     def __init__(self, scene: "Scene") -> None:
