@@ -400,8 +400,8 @@ def edge_fixed_reflection(
     dielectric face the face's TE/TM basis is turned against the edge-fixed one and ``G`` is
     full: it is the geometrical-optics reflection the term of that face's reflection boundary
     must cancel, which the diagonal pairs cannot (the total field then jumps there: 1.3 dB at
-    ``beta_0 = 42`` deg on a lossy wedge). The same construction as the "shadow-boundary
-    bases" with 2x2 reflection matrices that Sionna RT uses (Hashimoto et al.).
+    ``beta_0 = 42`` deg on a lossy wedge). Sionna RT also writes its faces' reflections as
+    2x2 matrices, in its own "shadow-boundary" bases (docs/sionna-diffraction.md).
     ``||G||_2 = max(|r_te|, |r_tm|)``: the two bases are orthonormal in the same planes.
     ``fallback``: the direction used where ``k`` runs along the edge (``beta_0 = 0``).
 
