@@ -537,8 +537,32 @@ def _pending_or_batch(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, tag, e, d, 
     """The end of :func:`_diffraction_candidates` (both forms) on the back-traced candidates
     (receiver-side rows ``e``, dihedra ``d``, sectors ``sec``, transmitter-side rows ``c``,
     path vertices ``verts``, amplitude bounds ``amp`` or ``None``): the pruning of weak ones,
-    then their pending record, or their occlusion and path batch."""
+    then their pending record, or their occlusion and path batch.
+
+    First, by structure, a reflection next to the diffraction on a mirror whose plane holds
+    the diffraction point (within the casters' plane tolerance): the reflection point is then
+    the diffraction point itself (a reflection on a face of the edge, or on a face coplanar
+    with one), a degenerate chain that the segment-length test of
+    :func:`~wavepaths.search.chains.occluded_chains` catches only where rounding leaves the
+    two points closer than the weld tolerance (at 1e6 m and grazing, they came out 5e-5 m
+    apart, and the path counted the edge's diffraction twice).
+    """
     tx_lv = ctx.levels[a]
+    holds = np.zeros(len(e), dtype=bool)
+    if len(e) and (a or b):
+        from ..raycast import plane_tolerance
+
+        tol = plane_tolerance(scene)
+        P = verts[:, a + 1]
+        for mirrors in ([tx_lv.polygons[c, a - 1]] if a else []) + ([rx_lv.polygons[e, b - 1]] if b else []):
+            n = scene.polygon_normal[mirrors]
+            dist = (n[:, 0] * P[:, 0] + n[:, 1] * P[:, 1]) + n[:, 2] * P[:, 2] - scene.polygon_offset[mirrors]
+            holds |= np.abs(dist) <= tol
+    if holds.any():
+        stats[f"{tag}_rejected_mirror_holds_edge_point"] += int(holds.sum())
+        keep = ~holds
+        e, d, sec, c, verts = e[keep], d[keep], sec[keep], c[keep], verts[keep]
+        amp = None if amp is None else amp[keep]
     if amp is not None and ctx.options.prune_db is not None:
         # pruned after the back-traces, so that the count bounds the paths dropped (not the
         # candidates): before the casts and the fields, which cost the most per path
