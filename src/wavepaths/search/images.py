@@ -191,7 +191,7 @@ def _candidates(
         ok[j] = beam_meets_spheres(apex[i[j]], pc[i[j]], pr[i[j]], c[j], rad[j], NODE_ANGLE_SLACK)
         return ok
 
-    yield from query_tree(tree, rows, node_test, CANDIDATE_BLOCK // max(tree.leaf_size, tree.branch))
+    yield from query_tree(tree, rows, node_test, max(1, CANDIDATE_BLOCK // max(tree.leaf_size, tree.branch)))
 
 
 def build_image_levels(
