@@ -293,8 +293,8 @@ def _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime
 def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y, phi, phi_prime, b0, nr, L, k, floor,
                    m0, mn, kinds, etas, thick, slab):
     """One row of :func:`diffract`: edge ``e``, directions ``s_in`` = ``a``, ``s_out`` = ``o``,
-    fallback ``f`` (the 0-face direction), ``y`` the n-face direction (a 3-tuple), the UTD angles, ``L``,
-    the faces' materials. The Jones matrix is
+    fallback ``f`` (the 0-face direction), ``y`` the n-face direction (a 3-tuple), the UTD
+    angles, ``L``, the faces' materials. The Jones matrix is
     :func:`wavepaths.em.utd.diffraction_jones_matrices`' with the faces' reflections of
     :func:`wavepaths.em.utd.wedge_reflection_matrices` (:func:`_edge_reflection`)."""
     sb = abs(math.sin(b0))
@@ -343,7 +343,9 @@ def diffract(addr, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0
              kinds, etas, thick, slab):
     """:func:`wavepaths.fields.chain._apply_diffraction` after the wedge geometry, model
     ``"utd"`` (Luebbers' face coefficients at their angles,
-    :func:`wavepaths.em.utd.luebbers_face_coefficients`), in place on ``E`` (k, P, 3).
+    :func:`wavepaths.em.utd.luebbers_face_coefficients`, as the faces' reflections in the
+    edge-fixed bases), in place on ``E`` (k, P, 3); ``x_fallback`` and ``y_face`` (k, 3) the
+    0-face and n-face directions.
     """
     for r in range(E.shape[0]):
         _diffract_row(addr, r, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0, n, L, k, floor, mat_0,
