@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import wavepaths.search.end_sides as tile
-from wavepaths.scene import load_scene
+from wavepaths.scene import load_scene, transformed
 from wavepaths.search import TraceOptions, kernels, trace
 from wavepaths.search.context import build_tx_context
 from wavepaths.search.diffraction import _source_frames
@@ -396,3 +396,32 @@ def test_compiled_diffraction_candidates_equal_numpy(prune, rng, monkeypatch):
     assert sum(v for k, v in ref.stats.items() if k.endswith("rejected_outside_polygon")) > 0
     if prune:
         assert ref.stats["pruned_paths_upper_bound"] > 0
+
+
+@pytest.mark.skipif(not kernels.available(), reason="numba is not installed (the `fast` extra)")
+def test_a_reflection_point_at_a_polygons_border_far_from_the_origin_is_decided_alike():
+    """A reflection point within about 1e-9 of a polygon's border, the scene at 1e6 m and
+    rotated: the numpy back-trace summed the plane distances with ``np.einsum``, in another
+    order than the kernel, and kept the reflection the kernel rejected
+    (``geometry.dot_rows`` now gives both one order)."""
+    from scipy.spatial.transform import Rotation
+
+    from ..conftest import boxes_scene
+
+    rng = np.random.default_rng(132)
+    rng.random()
+    boxes = []
+    for _ in range(rng.integers(1, 4)):
+        c, h = rng.uniform(-6, 6, 2), rng.uniform(0.5, 2.5, 3)
+        boxes.append(((c[0] - h[0], c[1] - h[1], 0.0), (c[0] + h[0], c[1] + h[1], 2 * h[2])))
+    scene = boxes_scene(boxes, ground=12)
+    tx = np.array([15.79794501367834, -7.0275448989774, 3.7250117643823892])
+    rx = np.array([-2.1154401060504933, 6.332519035780019, 3.262625883233236])
+    R, T = Rotation.random(random_state=132).as_matrix(), np.array([1e6, -2e6, 3e5])
+    moved = transformed(scene, R, T)
+    found = []
+    for compiled in (True, False):
+        p = trace(moved, (tx @ R.T + T)[None], (rx @ R.T + T)[None],
+                  TraceOptions(max_reflections=1, diffraction=False, compiled=compiled))
+        found.append(sorted(tuple(p.primitive[i, : p.depth[i]].tolist()) for i in range(len(p))))
+    assert found[0] == found[1]
