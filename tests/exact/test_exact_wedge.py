@@ -132,3 +132,14 @@ def test_input_checks() -> None:
         utd_wedge_total_field(1.0, 0.1, 0.2, 1.5, "soft", "ptd")  # type: ignore[arg-type]
     with pytest.raises(WavepathsError, match="beta_0"):
         utd_wedge_total_field(1.0, 0.1, 0.2, 1.5, "soft", beta_0=0.0)
+
+
+@pytest.mark.parametrize("k_rho", [6e4, 1e5])
+def test_the_series_converges_at_large_k_rho(k_rho):
+    """k rho = 6e4 and 1e5 (800 m and more at 3.5 GHz): the series refused them ("did not
+    converge") while its cut-off left Bessel factors of 1.6e-17 at its last order; n = 2
+    matches Sommerfeld's half-plane to the phase's rounding (1e-15 k rho), n = 1.5 is finite."""
+    phi, pp = np.array([1.0, 4.5]), np.radians(60)
+    half = wedge_plane_wave(k_rho, phi, pp, 2.0, "soft")
+    np.testing.assert_allclose(half, halfplane_plane_wave(k_rho, phi, pp, "soft"), atol=1e-14 * k_rho)
+    assert np.all(np.isfinite(wedge_plane_wave(k_rho, phi * 0.75, pp, 1.5, "hard")))

@@ -32,13 +32,21 @@ WedgeFieldModel = Literal["utd", "gtd", "sionna"]
 # super-exponentially.
 _SERIES_TAIL = 1e-17
 _CHUNK = 2048
+_BESSEL_BUDGET = 1 << 23  # (distinct k rho) x (terms) Bessel values held at once
+
+
+def _terms(xmax: float, n: float) -> int:
+    # M = n (k rho + 20 (k rho)^{1/3} + 30): 20 (k rho)^{1/3} past the turning point J_nu has
+    # fallen below 1e-30 at every k rho (with 10 (k rho)^{1/3} it was still 1.6e-17 at 6e4, and
+    # the series refused k rho above about 4e4)
+    return int(np.ceil(n * (xmax + 20.0 * xmax ** (1.0 / 3.0) + 30.0))) + 1
 
 
 def _series_chunk(
     x: NDArray[np.float64], p: NDArray[np.float64], pp: NDArray[np.float64], n: float, sign: float
 ) -> NDArray[np.complex128]:
     xmax = float(np.max(x)) if x.size else 0.0
-    m_count = int(np.ceil(n * (xmax + 10.0 * xmax ** (1.0 / 3.0) + 30.0))) + 1
+    m_count = first = _terms(xmax, n)
     while True:
         m = np.arange(m_count, dtype=float)
         nu = m / n
@@ -54,7 +62,7 @@ def _series_chunk(
         tail = np.abs(bessel_u[:, -5:])
         if np.all(tail < _SERIES_TAIL):
             break
-        if m_count > 100_000:
+        if m_count > 8 * first:
             raise WavepathsError(f"wedge series did not converge within {m_count} terms")
         m_count *= 2
     eps_m = np.where(m == 0, 1.0, 2.0)
@@ -75,9 +83,10 @@ def wedge_plane_wave(
 
     (``eps_0 = 1``, ``eps_m = 2``; ``-`` soft, ``+`` hard). For ``n = 1`` it is the
     Jacobi-Anger expansion of incident + image, for ``n = 2`` Sommerfeld's half-plane.
-    Truncated adaptively: from ``M = n (k rho + 10 (k rho)^{1/3} + 30)`` terms, doubled
+    Truncated adaptively: from ``M = n (k rho + 20 (k rho)^{1/3} + 30)`` terms, doubled
     until the last terms' Bessel factors are below 1e-17; non-finite Bessel values past the
-    turning point (``nu > k rho``) are dropped as negligible.
+    turning point (``nu > k rho``) are dropped as negligible. The points go through in chunks
+    small enough that their (distinct ``k rho``) x (terms) Bessel values stay near 8 M.
 
     Parameters
     ----------
@@ -104,8 +113,9 @@ def wedge_plane_wave(
         raise WavepathsError("`k_rho` must be >= 0")
     flat = [a.ravel() for a in (kr, p, pp)]
     out = np.empty(flat[0].shape, dtype=np.complex128)
-    for start in range(0, out.size, _CHUNK):
-        sl = slice(start, start + _CHUNK)
+    chunk = max(1, min(_CHUNK, _BESSEL_BUDGET // _terms(float(kr.max(initial=0.0)), n)))
+    for start in range(0, out.size, chunk):
+        sl = slice(start, start + chunk)
         out[sl] = _series_chunk(flat[0][sl], flat[1][sl], flat[2][sl], n, sign)
     return out.reshape(kr.shape)
 
