@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import warnings
 from typing import Callable, Sequence
@@ -195,11 +196,25 @@ def _register_extra() -> None:
         _EXTRA_COMMANDS.append((name, mod.add_parser))
 
 
+def _prepare_out(args) -> None:
+    """Create the output folder of the commands that take one (``--out DIR``: coverage, validate,
+    bench) before any work, so that a path that cannot be a folder (an existing file, a path
+    under one) is a clear error up front, not a traceback after a long computation."""
+    out = getattr(args, "out", None)
+    if out is None:
+        return
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as exc:
+        raise WavepathsError(f"--out {out!r} cannot be used as an output folder ({exc.strerror or exc})") from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     _register_extra()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        _prepare_out(args)
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             return int(args.func(args) or 0)

@@ -388,3 +388,25 @@ def test_block_tiles_cover_every_active_cell_once_in_compact_squares():
     assert max(len(t) for t in tiles) > side * side // 2
     runs = block_tiles((ny * nx,), active, size)
     assert [len(t) for t in runs[:-1]] == [size] * (len(runs) - 1)
+
+
+@pytest.mark.parametrize("cell", [1e-18, 1e-300, 5e-324])
+def test_a_cell_far_too_small_for_the_grid_is_refused(cell):
+    """size / cell_size beyond 2^31 cells per axis (or overflowing) raises; it used to wrap the
+    cell count round to a 1 x 1 map."""
+    with pytest.raises(WavepathsError, match="too small"):
+        PlanarGrid(center=[0.0, 0.0], size=[200.0, 80.0], cell_size=cell, height=1.5)
+
+
+def test_a_truncated_map_file_is_a_clear_error(tmp_path):
+    from wavepaths.coverage import CoverageMap
+
+    scene = load_scene("box_on_ground")
+    grid = PlanarGrid(center=[0.0, 0.0], size=[20.0, 20.0], cell_size=4.0, height=12.0)
+    cmap = coverage(scene, np.array([[-14.0, -8.0, 7.0]]), grid, TraceOptions(max_reflections=1),
+                    settings=CoverageOptions(workers=1))
+    path = cmap.save(str(tmp_path / "m.npz"))
+    (tmp_path / "t.npz").write_bytes((tmp_path / "m.npz").read_bytes()[:300])
+    with pytest.raises(WavepathsError, match="cannot read a coverage map"):
+        CoverageMap.load(str(tmp_path / "t.npz"))
+    assert CoverageMap.load(path).num_cells == cmap.num_cells

@@ -38,3 +38,19 @@ def test_cli_bad_input_exits_2_without_traceback(tmp_path):
         r = run("box_on_ground", *args, "--out", tmp_path, "--workers", 1, "--quiet")
         assert r.returncode == 2, (args, r.stderr)
         assert "Traceback" not in r.stderr and "wavepaths coverage: error:" in r.stderr
+
+
+def test_an_output_folder_that_cannot_be_one_is_refused_before_any_work(tmp_path):
+    """--out naming an existing file, or a path under one: exit 2 with one line, before the
+    map is traced (it used to raise FileExistsError after the whole map); a cell far too small
+    for the grid: exit 2 (it silently became a 1 x 1 map)."""
+    f = tmp_path / "a_file"
+    f.write_text("")
+    for out in (f, f / "below"):
+        r = run("street_canyon", "--tx", 0, 0, 10, "--height", 1.5, "--cell", 4, "--size", 40, 16, "--out", out,
+                "--workers", 1, "--quiet")
+        assert r.returncode == 2, r.stderr
+        assert "Traceback" not in r.stderr and "cannot be used as an output folder" in r.stderr
+    r = run("street_canyon", "--tx", -60, 0, 10, "--height", 1.5, "--cell", 1e-20, "--out", tmp_path / "m",
+            "--workers", 1, "--quiet")
+    assert r.returncode == 2 and "too small" in r.stderr and "Traceback" not in r.stderr

@@ -37,6 +37,11 @@ def _pair(value):
     return [value, value] if np.ndim(value) == 0 else value
 
 
+MAX_CELLS_PER_AXIS = 1 << 31
+"""Cells along one axis of a planar grid at most (a smaller cell is refused: ``size / cell_size``
+would overflow the cell count, which once turned a 1e-20 m cell into a 1 x 1 map)."""
+
+
 @dataclass(frozen=True, eq=False)
 class PlanarGrid:
     """A rectangle of ``ny x nx`` equal cells; receivers at the cell centres.
@@ -93,6 +98,11 @@ class PlanarGrid:
             )
         if (cell <= 0).any():
             raise WavepathsError(f"`cell_size` must be positive, got {cell.tolist()}")
+        with np.errstate(over="ignore"):
+            per_axis = size / cell
+        if not (np.isfinite(per_axis).all() and (per_axis <= MAX_CELLS_PER_AXIS).all()):
+            raise WavepathsError(f"`cell_size` {cell.tolist()} is too small for `size` {size.tolist()}: "
+                                 f"more than {MAX_CELLS_PER_AXIS:,} cells along an axis")
         ori = _finite_vector("orientation", self.orientation, (3,))
         object.__setattr__(self, "center", c)
         object.__setattr__(self, "size", size)

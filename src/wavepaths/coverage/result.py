@@ -24,6 +24,7 @@ as JSON under ``metadata``; :meth:`CoverageMap.load` restores the map.
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -247,10 +248,15 @@ class CoverageMap:
     def load(cls, path: str) -> "CoverageMap":
         """Read a map written by :meth:`save`."""
         try:
-            data = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
+            fh = open(path, "rb")
+        except OSError as exc:
             raise WavepathsError(f"{path}: cannot read a coverage map ({exc})") from None
-        with data:
+        try:  # np.load leaves its own handle open when the zip is truncated: ours is closed here
+            data = np.load(fh, allow_pickle=False)
+        except (OSError, ValueError, zipfile.BadZipFile) as exc:  # foreign or truncated
+            fh.close()
+            raise WavepathsError(f"{path}: cannot read a coverage map ({exc})") from None
+        with fh, data:
             need = ("metadata", "cell_centers", "inside", "tx_positions", "a_total", "a_sum", "power_sum", "num_paths")
             missing = [k for k in need if k not in data.files]
             if missing:
