@@ -40,3 +40,37 @@ def test_t_junction_splits_a_corner_into_the_shared_flat_stretch_and_the_free_co
     assert P[:2] == pytest.approx([0.0, 0.0], abs=1e-9) and 10.0 < P[2] < 20.0
     # and nothing diffracts on the flat stretch below the low roof
     assert not any(p.primitive[i, 0] == low_part for i in range(len(p)) if p.depth[i] == 1)
+
+
+@pytest.mark.parametrize("h", [1e-8, 1e-6])
+@pytest.mark.parametrize("side", [(-1.0, 1.0), (1.0, 1.0)])
+def test_a_sliver_along_an_edge_adds_no_face_to_it(h, side):
+    """A 10 m cube whose top front edge carries a sliver triangle 4-C-5, its tip C within the
+    weld tolerance of the edge (a T-junction patch of a CAD export) but its area above the
+    degenerate-area threshold, so it is kept. The edge keeps its two faces and its 270/90
+    degree sectors, every face direction a unit vector: the sliver's entries had a zero or
+    rounding-noise direction (its tip is the split vertex), or came back as half-faces of
+    the sliver 'polygon', and split the air sector (a transmitter there lost the diffraction)."""
+    from wavepaths.em.materials import PEC
+    from wavepaths.scene.model import build_scene
+    from wavepaths.topology.sectors import sector_table
+
+    L = 10.0
+    v = np.array([[0, 0, 0], [L, 0, 0], [L, L, 0], [0, L, 0], [0, 0, L], [L, 0, L], [L, L, L], [0, L, L]], float)
+    tris = []
+    for a, b, c, d in ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)):
+        tris += [[a, b, c], [a, c, d]]
+    v = np.vstack([v, [[L / 2, side[0] * h, L + side[1] * h]]])
+    tris = np.array(tris + [[4, 8, 5]])
+    scene = build_scene(v, tris, np.zeros(len(tris), int), np.zeros(len(tris), int), ["o"], [PEC])
+    assert scene.dropped_degenerate == 0  # the sliver is kept as a triangle
+    d = scene.dihedra
+    table = sector_table(d)
+    top_front = [i for i in range(len(d.length)) if np.allclose(d.origin[i], [0, 0, L], atol=1e-6)
+                 and abs(d.direction[i][0]) > 0.9]
+    assert len(top_front) == 1
+    i = top_front[0]
+    faces = d.face_direction[d.faces(i)]
+    np.testing.assert_allclose(np.linalg.norm(faces, axis=1), 1.0, atol=1e-12)
+    assert d.faces_per_dihedron[i] == 2 and d.diffracting[i]
+    np.testing.assert_allclose(np.sort(np.rad2deg(table.width[i][: table.count[i]])), [90.0, 270.0], atol=1e-4)  # the tip bends the edge by h / 5 m

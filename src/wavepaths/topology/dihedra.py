@@ -276,15 +276,24 @@ def build_dihedra(scene: "Scene") -> Dihedra:
     counts = np.bincount(entry_edge, minlength=num_e)
     third = verts[tris[entry_tri, (entry_side + 2) % 3]]
     rel = third - a[entry_edge]
-    pf = _unit(rel - np.einsum("ij,ij->i", rel, w[entry_edge])[:, None] * w[entry_edge])
+    perp = rel - np.einsum("ij,ij->i", rel, w[entry_edge])[:, None] * w[entry_edge]
+    # a triangle whose corner opposite the edge lies within the weld tolerance of the edge's
+    # line (a sliver along it, or a T-junction patch split at its own tip) has no direction
+    # away from the edge: its entry would be a zero or rounding-noise face direction, a
+    # spurious face that splits a sector. Dropped, unless the edge has no other entry.
+    proper = np.sqrt(np.einsum("ij,ij->i", perp, perp)) > scene.length_tolerance(scene.tolerances.weld)
+    proper |= np.bincount(entry_edge, weights=proper, minlength=num_e)[entry_edge] == 0
+    key_inc = entry_edge.astype(np.int64) * (scene.num_polygons + 1) + scene.triangle_polygon[entry_tri]
+    entry_edge, entry_tri, perp = entry_edge[proper], entry_tri[proper], perp[proper]
+    pf = _unit(perp)
     entry_poly = scene.triangle_polygon[entry_tri]
 
     # 2. edges running inside other polygons get that polygon's half-faces
     ce, cp = _edges_inside_polygons(scene, a, b)
     incident = np.zeros(len(ce), dtype=bool)
     if len(ce):
-        # drop polygons already incident to the edge
-        key_inc = entry_edge.astype(np.int64) * (scene.num_polygons + 1) + entry_poly
+        # drop polygons already incident to the edge (the dropped slivers' included: the edge
+        # does not run inside them either)
         key_c = ce.astype(np.int64) * (scene.num_polygons + 1) + cp
         incident = np.isin(key_c, key_inc)
     ce, cp = ce[~incident], cp[~incident]
