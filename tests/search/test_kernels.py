@@ -403,7 +403,7 @@ def test_a_reflection_point_at_a_polygons_border_far_from_the_origin_is_decided_
     """A reflection point within about 1e-9 of a polygon's border, the scene at 1e6 m and
     rotated: the numpy back-trace summed the plane distances with ``np.einsum``, in another
     order than the kernel, and kept the reflection the kernel rejected
-    (``geometry.dot_rows`` now gives both one order)."""
+    (``wavepaths._vec.dot3`` now gives both one order)."""
     from scipy.spatial.transform import Rotation
 
     from ..conftest import boxes_scene

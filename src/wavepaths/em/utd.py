@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import erfcx
 
+from wavepaths._vec import dot3, unit_cross
 from wavepaths.em.fresnel import ReflectionModel, reflection_coefficients
 from wavepaths.em.materials import Material
 from wavepaths.errors import WavepathsError
@@ -374,14 +375,6 @@ def luebbers_face_coefficients(
     return FaceCoefficients(r0.r_te, r0.r_tm, rn.r_te, rn.r_tm)
 
 
-def _unit_cross(a: Array, b: Array, fallback: Array) -> Array:
-    """unit(a x b) row by row, or ``fallback`` where a and b are parallel (``|a x b| <= 1e-12``,
-    as the field chain's bases)."""
-    c = np.cross(a, b)
-    m = np.sqrt(np.einsum("...i,...i->...", c, c))[..., None]
-    return np.where(m > 1e-12, c / np.where(m > 0, m, 1.0), fallback)
-
-
 def edge_fixed_reflection(
     r_te: ArrayLike, r_tm: ArrayLike, k_in: ArrayLike, k_out: ArrayLike, normal: ArrayLike, e: ArrayLike,
     fallback: ArrayLike,
@@ -414,23 +407,20 @@ def edge_fixed_reflection(
     z[..., 2] = 1.0
     x = np.zeros_like(nrm)
     x[..., 0] = 1.0
-    s = _unit_cross(ki, nrm, _unit_cross(nrm, z, x))  # the TE direction (as the reflection kernel's)
+    s = unit_cross(ki, nrm, unit_cross(nrm, z, x))  # the TE direction (as the reflection kernel's)
     p_i = np.cross(s, ki)
     p_r = np.cross(s, ko)
-    phi_i = _unit_cross(ki, ee, fb)
+    phi_i = unit_cross(ki, ee, fb)
     b_i = np.cross(ki, phi_i)
-    phi_o = _unit_cross(ee, ko, fb)
+    phi_o = unit_cross(ee, ko, fb)
     b_o = np.cross(ko, phi_o)
-
-    def dot(a, b):
-        return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]
 
     rte, rtm = np.asarray(r_te, dtype=complex), np.asarray(r_tm, dtype=complex)
     out = np.empty(np.broadcast_shapes(rte.shape, ki.shape[:-1]) + (2, 2), dtype=np.complex128)
     for a, u in enumerate((b_o, phi_o)):
-        us, up = dot(u, s), dot(u, p_r)
+        us, up = dot3(u, s), dot3(u, p_r)
         for b, v in enumerate((b_i, phi_i)):
-            out[..., a, b] = -(rte * (us * dot(s, v)) + rtm * (up * dot(p_i, v)))
+            out[..., a, b] = -(rte * (us * dot3(s, v)) + rtm * (up * dot3(p_i, v)))
     return out
 
 
@@ -453,8 +443,7 @@ def wedge_reflection_matrices(
     si, so, n0, nn = (np.asarray(v, dtype=float) for v in (s_in, s_out, normal_0, normal_n))
 
     def mirror(k, nrm):
-        d = (k[..., 0] * nrm[..., 0] + k[..., 1] * nrm[..., 1]) + k[..., 2] * nrm[..., 2]
-        return k - 2.0 * d[..., None] * nrm
+        return k - 2.0 * dot3(k, nrm)[..., None] * nrm
 
     g0 = edge_fixed_reflection(r0_s, r0_h, si, mirror(si, n0), n0, e, fallback)
     gn = edge_fixed_reflection(rn_s, rn_h, mirror(so, nn), so, nn, e, fallback)

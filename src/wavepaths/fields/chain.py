@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._vec import unit_cross as _perp_unit
 from ..em.antennas import antenna_field_vectors
 from ..em.fresnel import reflection_coefficients
 from ..em.polarization import spherical_unit_vectors
@@ -60,12 +61,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...j,...j->...", a, b)
 
-
-def _perp_unit(a: np.ndarray, b: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """unit(a x b), or ``fallback`` where a and b are parallel."""
-    c = np.cross(a, b)
-    n = np.linalg.norm(c, axis=-1, keepdims=True)
-    return np.where(n > 1e-12, c / np.where(n > 0, n, 1.0), fallback)
 
 
 def _apply_reflection(scene: "Scene", cfg: FieldConfig, E: np.ndarray, k_in, k_out, polygon) -> np.ndarray:

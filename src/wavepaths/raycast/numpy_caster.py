@@ -16,16 +16,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._vec import dot3
 from . import canonical, plane_tolerance
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
-
-
-def _dot3(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(k,) row-wise dot products of (k, 3) arrays, summed ``(u0 v0 + u1 v1) + u2 v2`` (the
-    compiled kernels' order; ``np.einsum`` may add in another)."""
-    return (u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1]) + u[:, 2] * v[:, 2]
 
 
 class ExactSegments:
@@ -96,7 +91,7 @@ class ExactSegments:
     # ---- pairwise ------------------------------------------------------------------------
     def in_plane(self, p: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """(k,) bool: the point ``p[i]`` (recentred) lies in the plane of ``tri[i]`` (within tol)."""
-        return np.abs(_dot3(p, self.normal[tri]) - self.offset[tri]) <= self.tol[tri]
+        return np.abs(dot3(p, self.normal[tri]) - self.offset[tri]) <= self.tol[tri]
 
     def crosses(self, a: np.ndarray, b: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """(k,) bool: the segment ``a[i] -> b[i]`` (recentred, canonical) passes through triangle ``tri[i]``."""
@@ -105,8 +100,8 @@ class ExactSegments:
         if k == 0:
             return out
         n, d = self.normal[tri], self.offset[tri]
-        sa = _dot3(a, n) - d
-        sb = _dot3(b, n) - d
+        sa = dot3(a, n) - d
+        sb = dot3(b, n) - d
         tol = self.tol[tri]
         strict = ((sa > tol) & (sb < -tol)) | ((sa < -tol) & (sb > tol))
         rows = np.nonzero(strict)[0]

@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._vec import dot3
 from ..topology.sectors import FACE_ANGLE_TOL, sector_lookup
 from . import kernels
 from .context import TxContext
-from .geometry import dot_rows
 from .images import ImageLevel
 from .visibility import VisibilityWindows
 
@@ -317,9 +317,9 @@ def _edge_frame(scene: "Scene", ctx: TxContext, points: np.ndarray, d: np.ndarra
     """Coordinates of ``points`` (k, 3) in the frame of edges ``d`` (k,): ``x``, ``y`` in the
     plane perpendicular to the edge (``x`` along its first face), ``t`` along it [m]."""
     v = points - scene.dihedra.origin[d]
-    x = dot_rows(v, ctx.sectors.x_hat[d])  # the compiled end_sides' order
-    y = dot_rows(v, ctx.sectors.y_hat[d])
-    t = dot_rows(v, scene.dihedra.direction[d])
+    x = dot3(v, ctx.sectors.x_hat[d])  # the compiled end_sides' order
+    y = dot3(v, ctx.sectors.y_hat[d])
+    t = dot3(v, scene.dihedra.direction[d])
     return x, y, t
 
 

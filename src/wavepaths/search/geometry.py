@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._vec import dot3
+
 
 def mirror_points(points: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Mirror images of ``points`` across planes ``n . x = d``.
@@ -21,13 +23,6 @@ def mirror_points(points: np.ndarray, normals: np.ndarray, offsets: np.ndarray) 
     """
     dist = np.einsum("...j,...j->...", points, normals) - offsets
     return points - 2.0 * dist[..., None] * normals
-
-
-def dot_rows(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(k,) row-wise dot products of (k, 3) arrays, summed ``(u0 v0 + u1 v1) + u2 v2``: the
-    compiled kernels' order (``np.einsum`` may add in another, and a decision next to a
-    polygon's border or a sector's face must come out the same in both forms)."""
-    return (u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1]) + u[:, 2] * v[:, 2]
 
 
 def segment_plane_intersection(a: np.ndarray, b: np.ndarray, normals: np.ndarray, offsets: np.ndarray):
@@ -47,8 +42,8 @@ def segment_plane_intersection(a: np.ndarray, b: np.ndarray, normals: np.ndarray
         when ``0 < t < 1``. Segments parallel to their plane get ``t = nan``-free
         sentinel ``-1``.
     """
-    da = dot_rows(a, normals) - offsets
-    db = dot_rows(b, normals) - offsets
+    da = dot3(a, normals) - offsets  # the kernels' summation order (wavepaths._vec)
+    db = dot3(b, normals) - offsets
     den = da - db
     ok = np.abs(den) > 0
     t = np.where(ok, da / np.where(ok, den, 1.0), -1.0)
