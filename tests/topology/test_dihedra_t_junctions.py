@@ -74,3 +74,60 @@ def test_a_sliver_along_an_edge_adds_no_face_to_it(h, side):
     np.testing.assert_allclose(np.linalg.norm(faces, axis=1), 1.0, atol=1e-12)
     assert d.faces_per_dihedron[i] == 2 and d.diffracting[i]
     np.testing.assert_allclose(np.sort(np.rad2deg(table.width[i][: table.count[i]])), [90.0, 270.0], atol=1e-4)  # the tip bends the edge by h / 5 m
+
+
+def _box_across_ground_border(x0: float, x1: float):
+    """A closed 4 x 2 x 3 m PEC box from ``x0`` to ``x1`` standing on a ground plane that ends
+    at x = 0 (it covers x in [-20, 0]): the box's foot edges along x cross the ground's border,
+    and the ground's border edge x = 0 runs under the box's floor for |y| <= 1."""
+    from wavepaths.em.materials import PEC
+    from wavepaths.scene import build_scene
+    from wavepaths.scene.builtin import SceneBuilder
+
+    b = SceneBuilder()
+    b.add_quad("ground", PEC, [(-20, -20, 0), (0, -20, 0), (0, 20, 0), (-20, 20, 0)])
+    b.add_box("box", PEC, (x0, -1, 0), (x1, 1, 3))
+    return build_scene(*b.arrays())
+
+
+@pytest.mark.parametrize("x0, x1", [(-1.0, 3.0), (-3.0, 1.0)])
+def test_an_edge_partly_inside_a_coplanar_polygon_is_split_at_its_border(x0, x1):
+    """The box's front foot edge (y = -1, z = 0) lies on the ground for x < 0 (the ground's two
+    half-faces: sectors of 90 and 180 degrees, no diffraction) and hangs in the air for x > 0
+    (wall and floor: 270 degrees). Before the split the midpoint decided for the whole edge:
+    with the box at [-1, 3] the foot diffracted on the ground too (a spurious path through the
+    ground), at [-3, 1] it never diffracted (a missed path over the overhang)."""
+    from wavepaths.search import TraceOptions, trace
+
+    scene = _box_across_ground_border(x0, x1)
+    dh = scene.dihedra
+    foot = np.nonzero((np.abs(dh.direction[:, 0]) > 0.999) & (np.abs(dh.origin[:, 1] + 1.0) < 1e-9)
+                      & (np.abs(dh.origin[:, 2]) < 1e-9))[0]
+    pieces = sorted((float(min(dh.origin[i, 0], dh.end[i, 0])), float(max(dh.origin[i, 0], dh.end[i, 0])), int(i))
+                    for i in foot)
+    assert [(lo, hi) for lo, hi, _ in pieces] == [pytest.approx((x0, 0.0), abs=1e-9), pytest.approx((0.0, x1), abs=1e-9)]
+    on_ground, in_air = pieces[0][2], pieces[1][2]
+    assert not dh.diffracting[on_ground] and np.degrees(dh.max_sector[on_ground]) == pytest.approx(180.0, abs=1e-6)
+    assert dh.diffracting[in_air] and np.degrees(dh.max_sector[in_air]) == pytest.approx(270.0, abs=1e-6)
+    # a transmitter beside the box and a receiver below the floor level, in the plane x = const:
+    # the Keller point is (x, -1, 0); over the overhang it is a path, on the ground it is not
+    opts = TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0)
+    for x, expected in ((-0.5, 0), (0.5, 1)):
+        p = trace(scene, np.array([[x, -6.0, 1.0]]), np.array([[x, 0.0, -3.0]]), opts)
+        at_foot = [i for i in range(len(p)) if p.depth[i] == 1
+                   and np.allclose(p.vertices[i, 1], [x, -1.0, 0.0], atol=1e-9)]
+        assert len(at_foot) == expected, (x, at_foot)
+
+
+def test_a_long_border_edge_keeps_its_diffraction_outside_a_floor_lying_on_part_of_it():
+    """The ground's border edge x = 0 (40 m) runs under the box's 2 m wide floor: only that
+    stretch gets the floor's half-faces, which make it flat (ground and floor coplanar: no
+    dihedron there). Before the split the floor covered its midpoint, and the whole 40 m edge
+    lost its diffraction."""
+    scene = _box_across_ground_border(-1.0, 3.0)
+    dh = scene.dihedra
+    border = np.nonzero((np.abs(dh.direction[:, 1]) > 0.999) & (np.abs(dh.origin[:, 0]) < 1e-9)
+                        & (np.abs(dh.origin[:, 2]) < 1e-9))[0]
+    spans = sorted((round(float(min(dh.origin[i, 1], dh.end[i, 1])), 9), round(float(max(dh.origin[i, 1], dh.end[i, 1])), 9),
+                    bool(dh.diffracting[i])) for i in border)
+    assert spans == [(-20.0, -1.0, True), (1.0, 20.0, True)]

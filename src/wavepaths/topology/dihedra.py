@@ -16,7 +16,9 @@ Construction (the "corefinement" the seed assumes, footnote 2):
    into the face;
 2. an edge lying inside another polygon (the foot of a box standing on a ground
    plane, a frame set into a wall) gets that polygon as faces too: one half-face on
-   each side of the edge where the polygon extends;
+   each side of the edge where the polygon extends.
+   Edges lying partly inside a polygon of their plane are first cut where they cross its
+   border (:func:`_split_at_polygon_borders`), so this is decided piece by piece;
 3. edges whose faces are all coplanar (triangulation diagonals, coplanar junctions)
    are flat: they are skipped and counted, never candidates;
 4. collinear edges that share a vertex and carry the same set of polygons are merged
@@ -24,9 +26,7 @@ Construction (the "corefinement" the seed assumes, footnote 2):
    exactly once.
 
 Not handled (documented in docs/scenes.md): objects that interpenetrate (their
-intersection curves are not computed), and edges that lie only partly inside another
-polygon without a vertex at the polygon's border (collinear overlaps are split at the
-vertices of either edge, step 0).
+intersection curves are not computed).
 """
 
 from __future__ import annotations
@@ -73,7 +73,8 @@ class Dihedra:
     diffracting : (d,) bool
         ``max_sector > pi`` (beyond the flat tolerance): the candidates of the path search.
     mesh_edges_ptr, mesh_edges : CSR, int64
-        The mesh edges (after the split at T-junctions, step 0) merged into each dihedron.
+        The mesh edges (after the splits at T-junctions and at the borders of coplanar
+        polygons, steps 0 and 2) merged into each dihedron.
     skipped_flat_edges : int
         Mesh edges whose faces are all coplanar (not dihedra).
     """
@@ -256,15 +257,181 @@ def _split_t_junctions(scene: "Scene"):
     return edges.astype(np.int64), e_edge[order], inc.incidence_tri[src], inc.incidence_side[src], int(len(vi))
 
 
+def _polygon_borders(scene: "Scene") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The border of every polygon, as segments grouped by polygon.
+
+    A mesh edge is on the border of polygon ``P`` when exactly one triangle of ``P`` is
+    incident to it (a triangulation diagonal has two).
+
+    Returns
+    -------
+    ptr : (p + 1,) int64
+        CSR pointer: polygon ``P``'s border segments are ``ptr[P]:ptr[P + 1]``.
+    c, d : (s, 3) float64
+        The segments' end points [m].
+    """
+    inc = scene.incidence
+    p = scene.num_polygons
+    edge = np.repeat(np.arange(len(inc.edges)), inc.counts)
+    key = edge.astype(np.int64) * (p + 1) + scene.triangle_polygon[inc.incidence_tri]
+    keys, count = np.unique(key, return_counts=True)
+    keys = keys[count == 1]
+    e, poly = keys // (p + 1), keys % (p + 1)  # sorted by edge: regroup by polygon
+    order = np.argsort(poly, kind="stable")
+    e, poly = e[order], poly[order]
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(poly, minlength=p))]).astype(np.int64)
+    v = scene.vertices
+    return ptr, v[inc.edges[e, 0]], v[inc.edges[e, 1]]
+
+
+BORDER_SAMPLES_PER_CHUNK = 1 << 12
+"""Points along the edges looked up at once in :func:`_split_at_polygon_borders` (bounds its memory)."""
+
+
+def _coplanar_polygon_pairs(scene: "Scene", a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (edge, polygon) where edge ``[a, b]`` lies in the polygon's plane and meets its
+    (padded) bounding box somewhere along its length, not only at its midpoint.
+
+    Points are sampled along each edge every half grid cell of :func:`_grid_pairs` (which
+    looks them up), and the boxes are padded by half that spacing: a box that the segment
+    meets holds, padded, the sample nearest the meeting point.
+    """
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    n, d = scene.polygon_normal, scene.polygon_offset
+    p = len(n)
+    z = np.zeros(0, dtype=np.int64)
+    if len(a) == 0 or p == 0:
+        return z, z
+    corners = scene.vertices[scene.triangles]
+    lo = np.full((p, 3), np.inf)
+    hi = np.full((p, 3), -np.inf)
+    np.minimum.at(lo, scene.triangle_polygon, corners.min(axis=1))
+    np.maximum.at(hi, scene.triangle_polygon, corners.max(axis=1))
+    cells = 256
+    h = 0.5 * max(float((hi.max(axis=0) - lo.min(axis=0)).max()) / cells, tol)
+    lo, hi = lo - (0.5 * h + tol), hi + (0.5 * h + tol)
+    length = np.linalg.norm(b - a, axis=1)
+    per = np.ceil(length / h).astype(np.int64) + 1  # samples per edge, both ends included
+    first = np.concatenate([[0], np.cumsum(per)])
+    # the signed distances of the edges' ends to every plane are cheap beside the lookups:
+    # each chunk keeps only its coplanar pairs before they are made unique
+    found = []
+    for s0 in range(0, int(first[-1]), BORDER_SAMPLES_PER_CHUNK):
+        s = np.arange(s0, min(s0 + BORDER_SAMPLES_PER_CHUNK, int(first[-1])))
+        edge = np.searchsorted(first, s, side="right") - 1
+        f = (s - first[edge]) / np.maximum(per[edge] - 1, 1)
+        pts = a[edge] + f[:, None] * (b[edge] - a[edge])
+        si, pi = _grid_pairs(lo, hi, pts, cells)
+        ei = edge[si]
+        ok = np.abs(np.einsum("ij,ij->i", a[ei], n[pi]) - d[pi]) <= tol
+        ei, pi, si = ei[ok], pi[ok], si[ok]
+        ok = np.abs(np.einsum("ij,ij->i", b[ei], n[pi]) - d[pi]) <= tol
+        ei, pi, si = ei[ok], pi[ok], si[ok]
+        ok = np.all((pts[si] >= lo[pi]) & (pts[si] <= hi[pi]), axis=1)
+        found.append(np.unique(ei[ok].astype(np.int64) * p + pi[ok]))
+    pairs = np.unique(np.concatenate(found))
+    return pairs // p, pairs % p
+
+
+def _split_at_polygon_borders(scene: "Scene", verts: np.ndarray, edges: np.ndarray, entry_edge: np.ndarray,
+                              entry_tri: np.ndarray, entry_side: np.ndarray):
+    """Edges split where they cross the border of a polygon whose plane they lie in.
+
+    An edge that runs partly inside another polygon (a roof edge whose end overlaps a
+    coplanar neighbouring roof, a box standing across the border of the ground) has the
+    polygon's two half-faces on one stretch only: there its air sector is smaller, and it
+    may not diffract at all, while the rest keeps its own faces. Each such edge is cut at
+    its crossings with the polygon's border segments (:func:`_polygon_borders`), so that
+    step 2 of :func:`build_dihedra` decides the half-faces piece by piece. Borders running
+    along the edge are skipped: their end vertices already split it (step 0). Pieces that
+    end up with the same faces are merged again by step 4.
+
+    Returns
+    -------
+    verts : (v + c, 3) float64
+        ``verts`` with the ``c`` crossing points appended.
+    edges, entry_edge, entry_tri, entry_side
+        As :func:`_split_t_junctions` returns them, for the pieces.
+    splits : int
+        Crossing points found.
+    """
+    a, b = verts[edges[:, 0]], verts[edges[:, 1]]
+    ce, cp = _coplanar_polygon_pairs(scene, a, b)
+    tol = scene.length_tolerance(scene.tolerances.weld)
+    if len(ce):
+        # not the polygons incident to the edge (it is on their border or a diagonal of them)
+        p = scene.num_polygons + 1
+        incident = np.isin(ce * p + cp, entry_edge.astype(np.int64) * p + scene.triangle_polygon[entry_tri])
+        ce, cp = ce[~incident], cp[~incident]
+    bptr, bc, bd = _polygon_borders(scene)
+    m = bptr[cp + 1] - bptr[cp]
+    pe = np.repeat(ce, m)  # (edge, border segment) pairs
+    seg = np.repeat(bptr[cp], m) + (np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m))
+    length = np.linalg.norm(b - a, axis=1)
+    w = (b - a) / np.where(length > 0, length, 1.0)[:, None]
+    # closest points of the lines a + t w (t in metres) and c + s u (s in [0, 1])
+    u = bd[seg] - bc[seg]
+    r = a[pe] - bc[seg]
+    B = np.einsum("ij,ij->i", w[pe], u)
+    C = np.einsum("ij,ij->i", u, u)
+    D = np.einsum("ij,ij->i", w[pe], r)
+    E = np.einsum("ij,ij->i", u, r)
+    den = C - B * B  # C sin^2 of the angle between the lines
+    crossing = den > 1e-12 * C
+    den = np.where(crossing, den, 1.0)
+    t = (B * E - C * D) / den
+    s = (E - B * D) / den
+    gap = np.linalg.norm(r + t[:, None] * w[pe] - s[:, None] * u, axis=1)
+    ulen = np.sqrt(C)
+    crossing &= (gap <= tol) & (t > tol) & (t < length[pe] - tol)
+    crossing &= (s * ulen >= -tol) & (s * ulen <= ulen + tol)
+    pe, t = pe[crossing], t[crossing]
+    if len(pe) == 0:
+        return verts, edges, entry_edge, entry_tri, entry_side, 0
+    o = np.lexsort((t, pe))
+    pe, t = pe[o], t[o]
+    # one split point per cluster of crossings within the weld tolerance (a border corner
+    # on the edge is crossed by its two segments)
+    new = np.ones(len(pe), dtype=bool)
+    new[1:] = (pe[1:] != pe[:-1]) | (t[1:] - t[:-1] > tol)
+    pe, t = pe[new], t[new]
+    split = np.unique(pe)
+    inner = np.bincount(pe, minlength=len(edges))[split]
+    vid = len(verts) + np.arange(len(pe))
+    verts = np.concatenate([verts, a[pe] + t[:, None] * w[pe]])
+    n_nodes = inner + 2
+    node_ptr = np.concatenate([[0], np.cumsum(n_nodes)])
+    nodes = np.empty(int(node_ptr[-1]), dtype=np.int64)
+    nodes[node_ptr[:-1]] = edges[split, 0]
+    nodes[node_ptr[1:] - 1] = edges[split, 1]
+    pos = np.arange(len(pe)) - np.repeat(np.cumsum(inner) - inner, inner)
+    # the nodes run from edges[., 0] to edges[., 1], the direction t is measured in
+    nodes[np.repeat(node_ptr[:-1], inner) + 1 + pos] = vid
+    n_pieces = inner + 1
+    k = np.arange(int(n_pieces.sum())) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces)
+    first = np.repeat(node_ptr[:-1], n_pieces) + k
+    pieces = np.sort(np.stack([nodes[first], nodes[first + 1]], axis=1), axis=1)
+    whole = np.setdiff1d(np.arange(len(edges)), split)
+    parent = np.concatenate([whole, np.repeat(split, n_pieces)])
+    out_edges = np.concatenate([edges[whole], pieces])
+    # each piece carries its parent's entries
+    e_ptr = np.concatenate([[0], np.cumsum(np.bincount(entry_edge, minlength=len(edges)))])
+    c = np.diff(e_ptr)[parent]
+    row = np.repeat(np.arange(len(parent)), c)
+    src = np.repeat(e_ptr[parent], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+    return (verts, out_edges.astype(np.int64), row.astype(np.int64), entry_tri[src], entry_side[src], int(len(pe)))
+
+
 def build_dihedra(scene: "Scene") -> Dihedra:
     """Build the :class:`Dihedra` of ``scene`` (seed §3.2).
 
     Cost: O(edges) for the incidence, plus O(edges x polygons) bounding-box tests to
     find edges lying inside other polygons (chunked; once per scene).
     """
-    verts = scene.vertices
     tris = scene.triangles
     edges, entry_edge, entry_tri, entry_side, _ = _split_t_junctions(scene)
+    verts, edges, entry_edge, entry_tri, entry_side, _ = _split_at_polygon_borders(
+        scene, scene.vertices, edges, entry_edge, entry_tri, entry_side)
     num_e = len(edges)
     a = verts[edges[:, 0]]
     b = verts[edges[:, 1]]
