@@ -149,3 +149,42 @@ def test_input_checks() -> None:
         slab_coefficients(2.0, 0.5, -0.1, 0.1)
     with pytest.raises(WavepathsError, match="outside"):
         reflection_coefficients(Material("x", "itu", 2.0, 0, 0, 0, 1e9, 2e9), 3e9, 0.5)
+
+
+def _compiled_fresnel(eta, c, thickness_over_lambda, slab):
+    from wavepaths.fields import compiled
+
+    if not compiled.available():
+        pytest.skip("numba is not installed (the `fast` extra)")
+    from wavepaths.fields import _numba
+
+    return _numba.fresnel(_numba.KIND_DIELECTRIC, complex(eta), float(thickness_over_lambda), slab, float(c))
+
+
+@pytest.mark.parametrize("c", [0.0, 0.1, 0.5])
+def test_a_lossless_medium_below_sin2_takes_the_decaying_root(c):
+    """eta = 0.5 (lossless, below sin^2 theta for cos theta <= 0.5: total reflection): the
+    coefficients are the limit of a vanishing loss, and a thick slab tends to the half-space
+    with no transmission. The principal root of the negative real (eta - 1) + c^2 with a +0
+    imaginary part is +j sqrt(.): the conjugate coefficient, and a slab's e^{-jq} grew as
+    e^{220} at 50 wavelengths (found by a review)."""
+    lossless = fresnel_half_space(0.5 + 0j, c)
+    lossy = fresnel_half_space(0.5 - 1e-13j, c)
+    assert abs(lossless.r_te - lossy.r_te) < 1e-11 and abs(lossless.r_tm - lossy.r_tm) < 1e-11
+    assert abs(lossless.r_te) == pytest.approx(1.0, abs=1e-12)
+    thick = slab_coefficients(0.5 + 0j, c, 50.0, 1.0)
+    assert abs(thick.r_te - lossless.r_te) < 1e-12 and abs(thick.t_te) < 1e-12
+    for slab, d in ((False, 0.0), (True, 50.0)):
+        r_te, r_tm = _compiled_fresnel(0.5 + 0j, c, d, slab)
+        assert abs(r_te - lossless.r_te) < 1e-12 and abs(r_tm - lossless.r_tm) < 1e-12
+
+
+@pytest.mark.parametrize("c", [0.0, 1e-12, 0.5, 1.0])
+def test_a_slab_of_thickness_zero_reflects_nothing_at_every_angle(c):
+    """d = 0 is no slab: R = 0, T = 1, at exact grazing too (it gave R = -1, T = 0 there:
+    the limits d -> 0 and cos theta -> 0 disagree; found by a review)."""
+    s = slab_coefficients(5.0 - 0.5j, c, 0.0, 0.1)
+    assert s.r_te == 0 and s.r_tm == 0 and s.t_te == 1 and s.t_tm == 1
+    r = reflection_coefficients(Material("thin", "custom", a=5.0, c=0.05, thickness_m=0.0), 3e9, c, "slab")
+    assert r.r_te == 0 and r.r_tm == 0
+    assert _compiled_fresnel(5.0 - 0.5j, c, 0.0, True) == (0j, 0j)

@@ -232,9 +232,10 @@ def test_luebbers_reduces_to_kp_as_eta_to_infinity(n: float) -> None:
         assert np.max(np.abs(d.d_h - ref.d_h)[ok]) <= tol_h * np.max(np.abs(ref.d_h)[ok])
 
 
-def test_luebbers_is_not_reciprocal() -> None:
-    # R0 at phi' and Rn at n pi - phi are not symmetric in phi <-> phi', so neither is D
-    # (contrary to the reference doc §5.5, which claims reciprocity with this angle choice).
+def test_luebbers_with_fixed_face_labels_is_not_reciprocal() -> None:
+    # R0 at phi' and Rn at n pi - phi are not symmetric in phi <-> phi' for fixed face labels,
+    # so neither is D: the field chain labels the faces so that phi' <= phi, which makes it
+    # reciprocal (fields.chain._reciprocal_face_order; tests/fields/test_fields_chain.py).
     conc = itu_material("concrete")
     a, b = np.radians(100), np.radians(45)
     ra = luebbers_face_coefficients(conc, conc, F35, a, b, 1.5)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from wavepaths import TraceOptions, trace
+from wavepaths.em.antennas import Antenna
 from wavepaths.em.fresnel import fresnel_half_space
 from wavepaths.em.materials import PEC, Material
 from wavepaths.em.utd import (
@@ -108,3 +109,36 @@ def test_diagonal_face_matrices_give_luebbers_coefficients():
                                        np.array([0, 0, 1.0]))
     np.testing.assert_allclose(G0, np.diag(r[:2]), atol=1e-15)
     np.testing.assert_allclose(Gn, np.diag(r[2:]), atol=1e-15)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("beta_deg", [90.0, 50.0])
+def test_the_diffracted_field_is_continuous_where_the_face_labels_switch(compiled, beta_deg):
+    """The chain labels a dielectric wedge's faces so that the source lies nearer the 0-face
+    than the observer (phi' <= phi, for reciprocity): the labels switch where the observer
+    crosses the source's angle, phi = phi'. Both labellings give the same coefficient there,
+    so the diffracted field is continuous across it (receivers 1e-7 rad apart), and away
+    from it the two sides differ by a finite amount (the test sees the switch)."""
+    scene = _wedge(LOSSY)
+    # 0-face z = 0 (y < 0), n-face y = 0 (z < 0), free space between: phi from -y toward +z ...
+    # the source at phi' = 60 deg from the 0-face, 10 m from the edge, beta_0 from its x offset
+    pp = np.radians(60.0)
+    d_perp = np.array([0.0, -np.cos(pp), np.sin(pp)])  # the 0-face direction is -y, the edge's normal side +z
+    x_off = 10.0 / np.tan(np.radians(beta_deg)) if beta_deg != 90.0 else 0.0
+    tx = np.array([-x_off, 0.0, 0.0]) + 10.0 * d_perp
+    eps = np.array([-1e-3, -1e-7, 1e-7, 1e-3])
+    ang = pp + eps
+    rx = np.stack([np.full(4, x_off * 0.8), -8.0 * np.cos(ang), 8.0 * np.sin(ang)], axis=1)
+    paths = trace(scene, tx[None], rx, TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0))
+    dh = scene.dihedra
+    edge = np.nonzero((np.abs(dh.direction[:, 0]) > 0.999) & (np.abs(dh.origin[:, 1]) < 1e-9)
+                      & (np.abs(dh.origin[:, 2]) < 1e-9) & dh.diffracting)[0]
+    assert len(edge) == 1
+    paths = paths.select((paths.depth == 1) & (paths.primitive[:, 0] == edge[0]))
+    assert sorted(paths.rx_index.tolist()) == [0, 1, 2, 3]
+    a = compute_fields(scene, paths, FieldConfig(3e9, tx_antenna=Antenna("iso", "VH"), rx_antenna=Antenna("iso", "VH"),
+                                                 reflection_model="half_space", compiled=compiled)).a
+    a = a[np.argsort(paths.rx_index)]
+    scale = np.max(np.abs(a))
+    assert np.max(np.abs(a[1] - a[2])) < 1e-5 * scale
+    assert np.max(np.abs(a[0] - a[3])) > 1e-4 * scale

@@ -193,7 +193,7 @@ def _vertical_amplitude(
         return math.sqrt(1.5) * rho
     if pattern == "hw_dipole":
         # Half-wave dipole, Balanis eq. 4-84, |cos(pi/2 cos t)| / sin t, scaled by the
-        # directivity 1.643 used by Sionna (the exact value is 1.64085). Written
+        # directivity 1.643 used by Sionna (the exact value is 4/Cin(2 pi) = 1.640922). Written
         # without a division by sin t: cos(pi/2 |z|) = sin(pi/2 (1 - |z|)) and
         # 1 - |z| = rho^2 / (1 + |z|), so the ratio is
         # sinc(rho^2 / (2 (1 + |z|))) * pi rho / (2 (1 + |z|)), which tends to 0 on axis.

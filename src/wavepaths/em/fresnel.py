@@ -91,11 +91,18 @@ def _check_eta(eta: ArrayLike) -> NDArray[np.complex128]:
 
 
 def _root(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> NDArray[np.complex128]:
-    """sqrt(eta - sin^2 theta) = sqrt((eta - 1) + cos^2 theta), principal branch (Re >= 0).
+    """sqrt(eta - sin^2 theta) = sqrt((eta - 1) + cos^2 theta), the branch with ``Im <= 0``
+    (the transmitted wave decays or is evanescent, exp(+jwt)).
 
     Written with ``eta - 1`` so that it stays exact for eta near 1 at grazing incidence.
+    The principal root has ``Im <= 0`` for ``Im eta < 0``; for a lossless ``eta`` below
+    ``sin^2 theta`` (total reflection) the argument is a negative real with ``Im = +0``,
+    whose principal root ``+j sqrt(.)`` grows in a slab: the imaginary part is signed
+    ``-0`` there, which gives ``-j sqrt(.)`` (the limit of a vanishing loss).
     """
-    return np.sqrt((eta - 1.0) + c * c)
+    w = np.array((eta - 1.0) + c * c, dtype=np.complex128, ndmin=1)  # a writable copy
+    w.imag[w.imag == 0.0] = -0.0
+    return np.sqrt(w).reshape(np.broadcast_shapes(np.shape(eta), np.shape(c)))
 
 
 class _HalfSpaceParts(NamedTuple):
@@ -167,7 +174,7 @@ def _slab(
     root = _root(eta, c)
     q = (2.0 * np.pi * thickness_m / wavelength_m) * root  # eq. (44)
     hs = _half_space_parts(eta, c)
-    e1 = np.exp(-1j * q)  # |e1| <= 1 because Im(root) <= 0 for Im(eta) <= 0
+    e1 = np.exp(-1j * q)  # |e1| <= 1 because Im(root) <= 0 (_root's branch)
     e2 = e1 * e1
     one_minus_e2 = -np.expm1(-2j * q)  # accurate for thin slabs
     out = []
@@ -180,6 +187,10 @@ def _slab(
         den = np.where(bad, 1.0, den)
         r = np.where(bad, rp, rp * one_minus_e2 / den)  # eq. (43a)
         t = np.where(bad, 0.0, om * e1 / den)  # eq. (43b)
+        # a slab of thickness 0 is no slab: R = 0, T = 1 at every angle (at exact grazing the
+        # limits d -> 0 and cos -> 0 disagree; the slab's absence decides)
+        r = np.where(thickness_m == 0, 0.0, r)
+        t = np.where(thickness_m == 0, 1.0, t)
         out.append((r, t))
     (r_te, t_te), (r_tm, t_tm) = out
     return SlabCoefficients(r_te, r_tm, t_te, t_tm)
@@ -197,7 +208,8 @@ def slab_coefficients(
         T = (1 - R'^2) e^{-jq} / (1 - R'^2 e^{-j2q})
 
     where ``R'`` is the half-space coefficient of :func:`fresnel_half_space` for the same
-    polarisation. ``d -> 0`` gives ``R -> 0, T -> 1``; a lossless slab has
+    polarisation. ``d -> 0`` gives ``R -> 0, T -> 1`` (``d = 0``: exactly, at grazing
+    incidence too); a lossless slab has
     ``|R|^2 + |T|^2 = 1``; a thick lossy slab gives ``R -> R'``.
 
     Parameters

@@ -170,7 +170,8 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
     c = min(abs(c), 1.0)
     # _half_space_parts, with root = sqrt((eta - 1) + c^2), den = (c + root)^2, (eta c + root)^2
     w = (eta - 1.0) + c * c
-    rr, ri = _csqrt(w.real, w.imag)
+    # the branch with Im <= 0 (wavepaths.em.fresnel._root): a zero imaginary part taken as -0
+    rr, ri = _csqrt(w.real, w.imag if w.imag != 0.0 else -0.0)
     root = complex(rr, ri)
     t_te = c + root
     t_tm = eta * c + root
@@ -187,6 +188,8 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
         om_tm = 4.0 * eta * c * root * i_tm
     if not slab:
         return r_te, r_tm
+    if thickness_over_lambda == 0.0:
+        return 0j, 0j  # no slab (wavepaths.em.fresnel._slab)
     # _slab, eqs. (43)-(44): q = 2 pi d/lambda root, e1 = e^{-jq}, e2 = e1^2 and
     # 1 - e2 = -expm1(-2jq) = 2 sin^2(q') - expm1(2q'') cos(2q') + 2j e^{2q''} sin(q') cos(q')
     # (q = q' + jq''; numpy's complex expm1 with the half-angle sine)
@@ -473,6 +476,13 @@ def _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, pri
             if not (s_before > 0.0 and s_after > 0.0):
                 deferred[r] = True  # an edge at an end of the path: the numpy chain's 1 / 0
                 return
+            if pp > ph:
+                # wavepaths.fields.chain._reciprocal_face_order: the faces exchanged, so that
+                # phi' <= phi (Luebbers' coefficient reciprocal)
+                f0, fn = fn, f0
+                ph, pp = nn * math.pi - ph, nn * math.pi - pp
+                e0, e1, e2 = -e0, -e1, -e2
+                b0 = math.pi - b0
             sin_b = max(abs(math.sin(b0)), floor)
             L = s_before * s_after / (s_before + s_after) * sin_b ** 2
             if not (L >= 0.0 and math.isfinite(L)):

@@ -144,7 +144,29 @@ def _sionna_face_order(g: dict) -> dict:
     """Relabel the wedge as Sionna RT 2.2 does: its 0-face is the face whose normal faces
     the incoming ray (``phi' < pi``). Swapping faces maps ``phi -> n pi - phi``,
     ``phi' -> n pi - phi'`` and reverses the edge vector (docs/sionna-diffraction.md §1)."""
-    swap = g["phi_prime"] > np.pi
+    return _swap_faces(g, g["phi_prime"] > np.pi)
+
+
+def _reciprocal_face_order(g: dict) -> dict:
+    """Relabel the wedge so that the source lies nearer the 0-face than the observer does
+    (``phi' <= phi``), for Luebbers' face coefficients (docs/conventions.md).
+
+    Luebbers takes ``R0`` at the source's angle ``phi'`` and ``Rn`` at the observer's
+    ``n pi - phi``: with the faces labelled by the edge alone, swapping transmitter and
+    receiver changes the coefficient of a lossy wedge (by up to 15 dB on the street
+    canyon). Mirroring the labels maps ``(phi, phi')`` to ``(n pi - phi, n pi - phi')``,
+    which evaluates Luebbers' formula as ``D(phi', phi)`` of the first labelling: the
+    coefficient becomes ``D(min(phi, phi'), max(phi, phi'))``, symmetric in the two ends
+    (reciprocal), continuous where they meet (``phi = phi'``: both labellings agree), and
+    unchanged at every shadow and reflection boundary, where both evaluate each face's
+    reflection at its geometrical-optics angle. A PEC wedge gives KP either way.
+    """
+    return _swap_faces(g, g["phi_prime"] > g["phi"])
+
+
+def _swap_faces(g: dict, swap: np.ndarray) -> dict:
+    """``g`` with the 0- and n-faces exchanged where ``swap``: ``phi -> n pi - phi``,
+    ``phi' -> n pi - phi'``, ``beta_0 -> pi - beta_0`` and the edge vector reversed."""
     if not swap.any():
         return g
     g = dict(g)
@@ -224,8 +246,7 @@ def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g
 def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, j, s_before, s_after) -> np.ndarray:
     g = wedge_geometry(scene, paths, rows, j, compiled=_compiled.use_compiled(cfg))
     _on_boundary_sides(scene, paths, rows, j, g, np.minimum(s_before, s_after))
-    if cfg.compat == "sionna":
-        g = _sionna_face_order(g)
+    g = _sionna_face_order(g) if cfg.compat == "sionna" else _reciprocal_face_order(g)
     e, s_in, s_out = g["e"], g["s_in"], g["s_out"]
     k = cfg.wavenumber
     # the coefficients floor |sin beta_0| at SIN_BETA_0_FLOOR; L takes the same floored sine, so
