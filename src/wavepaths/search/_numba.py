@@ -187,8 +187,14 @@ def _beam_meets(a0, a1, a2, p0, p1, p2, pr, c0, c1, c2, cr, slack):
         return True
     half_p = math.asin(min(max(pr / max(dp, 1e-300), 0.0), 1.0))
     half_q = math.asin(min(max(cr / max(dq, 1e-300), 0.0), 1.0))
-    cs = (t0 * u0 + t1 * u1 + t2 * u2) / max(dp * dq, 1e-300)
-    return math.acos(min(max(cs, -1.0), 1.0)) <= half_p + half_q + slack
+    return _angle3(t0, t1, t2, u0, u1, u2) <= half_p + half_q + slack
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _angle3(a0, a1, a2, b0, b1, b2):
+    # spheres.vector_angle for one pair: atan2(|a x b|, a . b), accurate near 0 and pi
+    c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a0 * b0 + a1 * b1 + a2 * b2)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -560,7 +566,7 @@ def _sphere_reach(x0, x1, x2, w0, w1, w2, c, r):
     # the edge direction and X -> c, and the sphere's angular radius delta seen from X
     v0, v1, v2 = c[0] - x0, c[1] - x1, c[2] - x2
     dist = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    th = math.acos(min(max((v0 * w0 + v1 * w1 + v2 * w2) / max(dist, 1e-300), -1.0), 1.0))
+    th = _angle3(v0, v1, v2, w0, w1, w2)
     de = math.asin(min(max(r / max(dist, 1e-300), 0.0), 1.0)) if dist > r else math.pi
     return th, de
 

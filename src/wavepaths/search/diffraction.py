@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import kernels
-from .spheres import morton_order
+from .spheres import morton_order, vector_angle
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
 from .end_sides import _EndSide, _keller_window, _receiver_side, _receiver_side_by_tree, _transmitter_side
@@ -109,7 +109,7 @@ def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = F
     def angle_range(X):
         v = c - X
         dist = np.linalg.norm(v, axis=1)
-        theta = np.arccos(np.clip(np.einsum("ij,ij->i", v, w) / np.maximum(dist, 1e-300), -1, 1))
+        theta = vector_angle(v, np.broadcast_to(w, v.shape))
         delta = np.where(dist > r, np.arcsin(np.clip(r / np.maximum(dist, 1e-300), 0, 1)), np.pi)
         return theta, delta
 

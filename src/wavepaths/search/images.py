@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import ImageTreeTooLarge, WavepathsError
 from ..scene.closed import points_inside_closed
-from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree
+from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree, vector_angle
 from .geometry import mirror_points, segment_plane_intersection
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -410,8 +410,7 @@ def build_image_levels_all_pairs(
             dist_q = np.linalg.norm(to_q, axis=1)
             half_p = np.arcsin(np.clip(radius[p] / np.maximum(dist_p, 1e-300), 0, 1))
             half_q = np.arcsin(np.clip(radius[q] / np.maximum(dist_q, 1e-300), 0, 1))
-            cos_axis = np.einsum("ij,ij->i", to_p, to_q) / np.maximum(dist_p * dist_q, 1e-300)
-            angle = np.arccos(np.clip(cos_axis, -1, 1))
+            angle = vector_angle(to_p, to_q)
             inside_cone = (dist_p <= radius[p]) | (dist_q <= radius[q]) | (angle <= half_p + half_q + 1e-9)
             keep &= inside_cone
         chain, q = chain[keep], q[keep]
