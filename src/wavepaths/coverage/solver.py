@@ -37,7 +37,7 @@ from ..fields import FieldConfig, compute_fields
 from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
-from ..search.paths import InteractionType, Paths, assemble, path_order
+from ..search.paths import InteractionType, Paths, assemble, coincident_paths, path_order
 from ..search import kernels
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
@@ -291,6 +291,11 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
         return z, z, np.zeros(0, complex), np.zeros(0)
     order = path_order(paths.tx_index, paths.rx_index, paths.depth, paths.lengths, paths.interactions, paths.primitive,
                        k)
+    # a path found once per primitive at a seam counts once, as in trace() (search.paths.coincident_paths)
+    drop = coincident_paths(paths.tx_index, paths.rx_index, paths.depth, paths.interactions, paths.lengths,
+                            paths.vertices, order, scene.length_tolerance(scene.tolerances.weld))
+    if drop.any():
+        order = order[~drop[order]]
     pair = paths.tx_index * k + paths.rx_index
     key = path_mechanism(paths) * (m * k) + pair
     result = compute_fields(scene, paths, config)

@@ -283,12 +283,53 @@ def _key_length_order():
     return key_length_order
 
 
-def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True) -> Paths:
+def coincident_paths(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarray, interactions: np.ndarray,
+                     lengths: np.ndarray, vertices: np.ndarray, order: np.ndarray, tol: float) -> np.ndarray:
+    """(N,) bool: the paths that repeat another one, to drop.
+
+    A reflection point on the common border of two coplanar polygons (a wall of two
+    materials, two touching or stacked boxes) lies in both, and a diffraction point where
+    two collinear dihedra meet (an edge whose faces change there) lies on both: the search
+    finds the one geometrical path once per primitive. Two paths are the same when they
+    join the same transmitter and receiver with the same interaction kinds and every vertex
+    within ``tol`` [m] of the other's; the first in ``order`` (:func:`path_order`, where such
+    paths are neighbours: same key, lengths within rounding) is kept.
+
+    Parameters
+    ----------
+    tx_index, rx_index, depth : (N,) int64
+    interactions : (N, D) int8
+    lengths : (N,) float64 [m]
+    vertices : (N, D + 2, 3) float64 [m]
+        Padded with the receiver past each path's end.
+    order : (N,) int64
+        :func:`path_order` of these arrays.
+    tol : float
+        [m], the scene's weld tolerance.
+    """
+    drop = np.zeros(len(order), dtype=bool)
+    if len(order) < 2:
+        return drop
+    a, b = order[:-1], order[1:]
+    near = ((tx_index[a] == tx_index[b]) & (rx_index[a] == rx_index[b]) & (depth[a] == depth[b])
+            & (np.abs(lengths[a] - lengths[b]) <= 2.0 * (depth[a] + 1) * tol))
+    a, b = a[near], b[near]
+    if len(a):
+        same = np.all(interactions[a] == interactions[b], axis=1)
+        same &= np.abs(vertices[a] - vertices[b]).max(axis=(1, 2)) <= tol
+        drop[b[same]] = True
+    return drop
+
+
+def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True,
+             merge_tol: float | None = None) -> Paths:
     """Concatenate path batches of different depths into one padded :class:`Paths`.
 
     ``sort``: in the order of :func:`path_order`, deterministic and independent of the
     batches' order. Without it the paths come batch after batch, and ``path_order(...)``
     of their arrays gives that order (a coverage tile sorts only its per-path values).
+    ``merge_tol`` [m]: with ``sort``, paths repeating another within it are dropped
+    (:func:`coincident_paths`) and counted in ``stats["paths_dropped_coincident"]``.
     """
     batches = [b for b in batches if len(b.tx_index)]
     dmax = max([b.interactions.shape[1] for b in batches], default=0)
@@ -323,6 +364,11 @@ def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: di
         d = np.diff(vertices, axis=1)
         lengths = np.sqrt(np.einsum("nsj,nsj->ns", d, d)).sum(axis=1)
         order = path_order(txi, rxi, depth, lengths, kinds, prims, len(rx))
+        if merge_tol is not None:
+            drop = coincident_paths(txi, rxi, depth, kinds, lengths, vertices, order, merge_tol)
+            if drop.any():
+                stats["paths_dropped_coincident"] = stats.get("paths_dropped_coincident", 0) + int(drop.sum())
+                order = order[~drop[order]]
         txi, rxi, depth, kinds, prims, tri, wedge, vertices = (a[order] for a in (txi, rxi, depth, kinds, prims, tri,
                                                                                   wedge, vertices))
     return Paths(tx_positions=tx, rx_positions=rx, tx_index=txi, rx_index=rxi, depth=depth, interactions=kinds,

@@ -238,4 +238,4 @@ def trace(
         stats.update(st)
         if progress is not None:
             progress(min(len(rx), s + size))
-    return assemble(tx, rx, batches, dict(stats))
+    return assemble(tx, rx, batches, dict(stats), merge_tol=scene.length_tolerance(scene.tolerances.weld))
