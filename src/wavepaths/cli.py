@@ -1,13 +1,16 @@
 """The ``wavepaths`` command line: a thin layer over the Python API.
 
 Every subcommand turns a :class:`~wavepaths.errors.WavepathsError` into one line on
-standard error and exit status 2, without a traceback.
+standard error and exit status 2, without a traceback. The JSON it prints is strict JSON:
+a number that is not finite (``-inf`` dB where no path arrives, NaN) is written ``null``
+(:func:`json_text`).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import warnings
@@ -16,6 +19,30 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .errors import WavepathsError
+
+
+def json_ready(value):
+    """``value`` with every non-finite float (NaN, ``inf``, ``-inf``) replaced by ``None``,
+    numpy scalars and arrays turned into Python numbers and lists, tuples into lists."""
+    if isinstance(value, dict):
+        return {k: json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_ready(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def json_text(value, indent: int | None = 1) -> str:
+    """Strict JSON for ``value``: non-finite numbers become ``null`` (:func:`json_ready`);
+    ``NaN``, ``Infinity`` and ``-Infinity``, which JSON does not have, are never written."""
+    return json.dumps(json_ready(value), indent=indent, allow_nan=False)
 
 
 def _scene(args):
@@ -28,7 +55,7 @@ def _cmd_info(args) -> int:
     scene = _scene(args)
     info = scene.summary()
     if args.json:
-        print(json.dumps(info, indent=2))
+        print(json_text(info, indent=2))
         return 0
     print(f"scene      {info['source']}")
     print(f"triangles  {info['triangles']}")
@@ -68,12 +95,13 @@ def _cmd_paths(args) -> int:
     scene = _scene(args)
     tx = np.array(args.tx, dtype=float).reshape(-1, 3)
     rx = np.array(args.rx, dtype=float).reshape(-1, 3)
+    field_cfg = _field_config(args)  # checked before the search
     paths = trace(scene, tx, rx, _trace_options(args))
-    field_cfg = _field_config(args)
     result = None
     if field_cfg is not None:
         from .fields import compute_fields
 
+        # the incident fields make the field strength independent of the receive antenna
         result = compute_fields(scene, paths, field_cfg)
     records = paths.records()
     if result is not None:
@@ -82,17 +110,12 @@ def _cmd_paths(args) -> int:
         for i, r in enumerate(records):
             r["a"] = [float(a[i].real), float(a[i].imag)]
             r["gain_db"] = float(gain[i])
-    receivers = []
-    for j in range(len(rx)):
-        entry = {"rx": j, "position": rx[j].tolist(), "num_paths": int(np.count_nonzero(paths.rx_index == j))}
-        if result is not None:
-            entry.update(result.receiver_summary(j))
-        receivers.append(entry)
+    receivers = _receiver_entries(paths, result, rx, len(tx))
     if args.json:
         out = {"scene": scene.source, "tx": tx.tolist(), "rx": rx.tolist(), "paths": records, "receivers": receivers}
         if result is not None:
             out["frequency_hz"] = result.frequency_hz
-        print(json.dumps(out, indent=1))
+        print(json_text(out))
         return 0
     print(f"{len(records)} paths in {scene.source}")
     header = f"{'tx':>3} {'rx':>3}  {'interactions':<34} {'length [m]':>11} {'delay [ns]':>11}"
@@ -107,9 +130,42 @@ def _cmd_paths(args) -> int:
         print(line)
     if result is not None:
         for e in receivers:
-            print(f"rx {e['rx']}: path gain {e['path_gain_db']:.2f} dB (coherent), "
-                  f"{e['path_gain_incoherent_db']:.2f} dB (power sum)")
+            if len(tx) == 1:
+                print(f"rx {e['rx']}: path gain {e['path_gain_db']:.2f} dB (coherent), "
+                      f"{e['path_gain_incoherent_db']:.2f} dB (power sum)")
+                continue
+            best = "none (no path arrives)" if e["best_server"] is None else f"tx {e['best_server']}"
+            print(f"rx {e['rx']}: best server {best}")
+            for t in e["per_tx"]:
+                print(f"  tx {t['tx']} -> rx {e['rx']}: {t['num_paths']} paths, path gain {t['path_gain_db']:.2f} dB "
+                      f"(coherent), {t['path_gain_incoherent_db']:.2f} dB (power sum)")
     return 0
+
+
+def _receiver_entries(paths, result, rx: np.ndarray, num_tx: int) -> list[dict]:
+    """The ``receivers`` of ``paths --json``: per receiver, its path count over all
+    transmitters (``num_paths``), the totals of one transmitter (``totals_tx``: the best
+    server, the one with the highest coherent path gain; transmitter 0 when no path
+    arrives), ``best_server`` (``None`` when no path arrives) and ``per_tx``: one entry per
+    transmitter with its ``num_paths`` and totals."""
+    counts = np.zeros((num_tx, len(rx)), dtype=np.int64)
+    np.add.at(counts, (paths.tx_index, paths.rx_index), 1)
+    gain = result.path_gain(True) if result is not None else None
+    entries = []
+    for j in range(len(rx)):
+        entry = {"rx": j, "position": rx[j].tolist(), "num_paths": int(counts[:, j].sum())}
+        per_tx = [{"tx": i, "num_paths": int(counts[i, j])} for i in range(num_tx)]
+        if result is not None:
+            best = int(np.argmax(gain[:, j]))
+            reached = bool(gain[best, j] > 0)
+            entry["best_server"] = best if reached else None
+            entry["totals_tx"] = best if reached else 0
+            entry.update(result.receiver_summary(j, entry["totals_tx"]))
+            for i, t in enumerate(per_tx):
+                t.update(result.receiver_summary(j, i))
+        entry["per_tx"] = per_tx
+        entries.append(entry)
+    return entries
 
 
 def _field_config(args):

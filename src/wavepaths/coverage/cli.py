@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 
 import numpy as np
@@ -87,14 +86,18 @@ def _client(address: str):
         return Client(address, timeout=30)
     except (OSError, TimeoutError) as exc:
         raise WavepathsError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+    except (ValueError, TypeError) as exc:  # not an address distributed can parse
+        raise WavepathsError(f"--dask {address!r} is not a Dask scheduler address such as "
+                             f"tcp://HOST:8786 ({exc})") from None
 
 
 def run(args) -> int:
-    from ..cli import _field_config, _trace_options
+    from ..cli import _field_config, _trace_options, json_text
     from ..scene import load_scene
     from .plot import save_png
     from .solver import CoverageOptions, coverage
 
+    fields = _field_config(args)  # checked before any work
     scene = load_scene(args.scene)
     grid = _grid(args, scene)
     settings = CoverageOptions(tile_size=args.tile_size, coherent=not args.incoherent, workers=args.workers,
@@ -102,7 +105,7 @@ def run(args) -> int:
     tx = np.array(args.tx, dtype=float).reshape(-1, 3)
     client = _client(args.dask) if args.dask else None
     try:
-        cmap = coverage(scene, tx, grid, _trace_options(args), fields=_field_config(args), settings=settings,
+        cmap = coverage(scene, tx, grid, _trace_options(args), fields=fields, settings=settings,
                         client=client, progress=not args.quiet)
     finally:
         if client is not None:
@@ -118,7 +121,8 @@ def run(args) -> int:
         "shape": list(cmap.shape),
         "cells": cmap.num_cells,
         "cells_inside_objects": int(cmap.inside.sum()),
-        "cells_without_paths": int(np.isneginf(values).sum()),
+        "cells_without_paths": int(cmap.without_paths().sum()),
+        "cells_without_quantity": int((np.isneginf(values) & ~cmap.inside).sum()),
         "elapsed_s": cmap.elapsed_s,
         "cells_per_second": cmap.cells_per_second,
         "ran_on": cmap.metadata["workers"],
@@ -129,10 +133,12 @@ def run(args) -> int:
         "npz": npz,
     }
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print(json_text(summary))
         return 0
     print(f"coverage of {scene.source}: {cmap.num_cells} cells ({' x '.join(map(str, cmap.shape))}), "
           f"{summary['cells_inside_objects']} inside objects, {summary['cells_without_paths']} without paths")
+    if summary["cells_without_quantity"] != summary["cells_without_paths"]:
+        print(f"{args.quantity}: -inf dB on {summary['cells_without_quantity']} cells (no path of its kind)")
     print(f"{cmap.elapsed_s:.2f} s ({cmap.cells_per_second:.0f} cells/s, {summary['ran_on']})")
     if finite.size:
         print(f"{args.quantity}: {summary['min']:.1f} .. {summary['max']:.1f}")

@@ -5,7 +5,9 @@ labelled and offset like it (a horizontal grid shows world ``x``, ``y``; the ver
 wall of the shutter example shows ``x``, ``z``). The scene is drawn as the lines where
 its triangles cut the grid's plane (building walls at the receiver height), cells inside
 solid objects are light grey, cells no path reaches dark grey (the colour bar's "under"
-triangle; values merely below the colour range take its lowest colour), and each
+triangle; :meth:`CoverageMap.without_paths`, whatever the quantity), cells that paths reach
+but where the quantity is zero (a mechanism none of them has: ``-inf`` dB) mid grey, values
+merely below the colour range take its lowest colour, and each
 transmitter is a red star at its projection on the plane.
 """
 
@@ -31,6 +33,9 @@ LABELS = {
 }
 
 
+ABSENT_COLOR = "0.5"  # cells reached only by paths the quantity leaves out
+
+
 def color_range(values: np.ndarray, dynamic_range_db: float = 80.0) -> tuple[float, float]:
     """(vmin, vmax) covering the finite values, at most ``dynamic_range_db`` below the top."""
     finite = values[np.isfinite(values)]
@@ -51,8 +56,9 @@ def _axis_name(vec: np.ndarray) -> tuple[str, int] | None:
 def plane_axes(grid: PlanarGrid) -> list[tuple[float, float, str]]:
     """How the plot shows the grid's ``u`` and ``v``: ``(offset, sign, label)`` for each.
 
-    A grid axis along a world axis is shown in world coordinates (``shown = offset + sign *
-    local``); otherwise in metres from the grid centre.
+    A grid axis along a world axis ``i`` is shown in world coordinates: ``shown = offset +
+    sign * local`` with ``offset = center[i]`` and ``sign`` the direction of the grid axis
+    along world axis ``i`` (``+1`` or ``-1``); otherwise in metres from the grid centre.
     """
     r = grid.rotation
     out = []
@@ -63,7 +69,7 @@ def plane_axes(grid: PlanarGrid) -> list[tuple[float, float, str]]:
         else:
             name, i = named
             sign = float(np.sign(r[i, j]))
-            out.append((sign * grid.center[i], sign, f"{name} [m]"))
+            out.append((float(grid.center[i]), sign, f"{name} [m]"))  # world = centre + sign * local
     return out
 
 
@@ -123,15 +129,21 @@ def plot_coverage(
     vmin, vmax : float, optional
         Colour range; default the finite values, at most ``dynamic_range_db`` wide. Values
         below it take its lowest colour; the colour bar's "under" colour (dark grey, the
-        triangle) marks cells that no path reaches, light grey cells inside objects.
+        triangle) marks cells that no path reaches (from ``tx``, or from any transmitter),
+        mid grey cells reached only by paths the quantity leaves out (``-inf`` dB of a
+        mechanism), light grey cells inside objects.
     aspect : "equal", "auto" or float
         As matplotlib's ``imshow``.
     """
     import matplotlib
     from matplotlib.collections import LineCollection
+    from matplotlib.colors import ListedColormap
     from matplotlib.figure import Figure
 
     values = cmap.quantity(quantity, tx)
+    no_path = cmap.without_paths(tx)
+    # reached, but the quantity is zero there (no path of its mechanism): its own colour
+    absent = np.isneginf(values) & ~no_path & ~cmap.inside
     lo, hi = color_range(values, dynamic_range_db)
     vmin = lo if vmin is None else vmin
     vmax = hi if vmax is None else vmax
@@ -141,7 +153,10 @@ def plot_coverage(
     colors = matplotlib.colormaps[colormap].with_extremes(bad="0.85", under="0.15")
     label = LABELS.get(quantity, quantity)
     # finite values below the range take its lowest colour; the "under" colour means no path
-    shown = np.where(np.isneginf(values), vmin - 1.0, np.maximum(values, vmin))
+    shown = np.where(no_path, vmin - 1.0, np.maximum(values, vmin))
+    shown = np.where(absent, np.nan, shown)  # drawn over in ABSENT_COLOR below
+    absent_layer = np.ma.masked_where(~absent, np.zeros(absent.shape))
+    absent_colors = ListedColormap([ABSENT_COLOR])
     tx_local = None
     if isinstance(cmap.grid, PlanarGrid):
         g = cmap.grid
@@ -151,6 +166,9 @@ def plot_coverage(
         extent = [ou + su * (u[0] - hu), ou + su * (u[-1] + hu), ov + sv * (v[0] - hv), ov + sv * (v[-1] + hv)]
         art = ax.imshow(shown, origin="lower", extent=extent, cmap=colors, vmin=vmin, vmax=vmax,
                         interpolation="nearest", aspect=aspect)
+        if absent.any():
+            ax.imshow(absent_layer, origin="lower", extent=extent, cmap=absent_colors, vmin=0, vmax=1,
+                      interpolation="nearest", aspect=aspect)
         if scene is not None:
             cuts = plane_cuts(scene, g)
             if len(cuts):
@@ -166,6 +184,9 @@ def plot_coverage(
         m = cmap.grid
         art = ax.tripcolor(m.vertices[:, 0], m.vertices[:, 1], m.faces, facecolors=shown, cmap=colors,
                            vmin=vmin, vmax=vmax)
+        if absent.any():
+            ax.tripcolor(m.vertices[:, 0], m.vertices[:, 1], m.faces[absent], facecolors=np.zeros(int(absent.sum())),
+                         cmap=absent_colors, vmin=0, vmax=1)
         ax.set_aspect(aspect)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
@@ -176,7 +197,7 @@ def plot_coverage(
             for i, (x, y) in enumerate(tx_local):
                 ax.annotate(f"tx {i}", (x, y), textcoords="offset points", xytext=(6, 6), color="r")
     if colorbar:
-        extend = "min" if np.isneginf(values).any() else "neither"  # the triangle: cells no path reaches
+        extend = "min" if no_path.any() else "neither"  # the triangle: cells no path reaches
         ax.figure.colorbar(art, ax=ax, label=label, extend=extend)
     ax.set_title(title if title is not None else label)
     return art

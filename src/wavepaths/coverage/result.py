@@ -9,7 +9,10 @@ transmitter or best server, without tracing again):
 * ``a_sum`` — the same sum restricted to one mechanism;
 * ``power_sum`` — ``sum |a|^2`` per mechanism (the incoherent split, which adds up
   exactly to the incoherent total);
-* ``num_paths`` — how many paths of each mechanism reach the cell.
+* ``num_paths`` — how many paths of each mechanism reach the cell;
+* ``field_total`` — ``sum e e^{-j 2 pi f tau}``, the paths' field vectors at the cell before
+  the receive antenna (normalised like ``a``), and ``field_power_sum`` — ``sum |e|^2``: the
+  field strength, which does not depend on the receive antenna.
 
 Mechanisms (:data:`MECHANISMS`): line of sight (no interaction), reflection (one or more
 specular reflections only), diffraction (a path with an edge diffraction, with or
@@ -43,7 +46,8 @@ SPEED_OF_LIGHT = 299_792_458.0
 def field_strength_dbuv_m(received_power_dbm: np.ndarray, frequency_hz: float) -> np.ndarray:
     """Field strength [dBuV/m] seen by an isotropic receiver that gets ``received_power_dbm``.
 
-    As :meth:`wavepaths.fields.FieldResult.field_strength`: the effective area
+    ``received_power_dbm`` must be that of an isotropic receive antenna (any other's gain
+    would go into the result). As :func:`wavepaths.fields.result.field_strength_v_m`: the effective area
     ``lambda^2 / 4 pi`` gives ``E = sqrt(eta_0 P_r 4 pi) / lambda`` [V/m]; in decibels
     ``E_dBuV/m = P_dBm - 30 + 10 log10(4 pi eta_0) - 20 log10(lambda) + 120``.
     ``-inf`` and NaN pass through.
@@ -76,6 +80,13 @@ class CoverageMap:
     num_paths : (3, m) + shape int32
     frequency_hz : float
     tx_power_dbm : float
+    field_total : (m,) + shape + (3,) complex128 or None
+        ``sum e e^{-j 2 pi f tau}`` over the cell's paths: their field 3-vectors at the cell
+        centre, before the receive antenna (transmit port 0, unit transmit power, normalised
+        like ``a``: :attr:`wavepaths.fields.FieldResult.incident_field`). ``None`` in a map
+        file written before it was kept.
+    field_power_sum : (m,) + shape float64 or None
+        ``sum |e|^2``.
     coherent : bool
         Whether the map's default quantities add paths coherently (``|sum a e^{-j2pi f tau}|^2``)
         or by power (``sum |a|^2``).
@@ -100,6 +111,8 @@ class CoverageMap:
     num_paths: np.ndarray
     frequency_hz: float
     tx_power_dbm: float
+    field_total: np.ndarray | None = None
+    field_power_sum: np.ndarray | None = None
     coherent: bool = True
     elapsed_s: float = 0.0
     timings: dict = field(default_factory=dict)
@@ -137,31 +150,62 @@ class CoverageMap:
 
     @property
     def best_server(self) -> np.ndarray:
-        """shape int64: the transmitter with the highest path gain; -1 inside objects or
-        where no path arrives."""
-        g = self.path_gain_per_tx()
+        """shape int64: the transmitter with the highest path gain (the map's default
+        reading, :attr:`coherent`); -1 inside objects or where no path arrives."""
+        return self.best_server_by()
+
+    def best_server_by(self, coherent: bool | None = None) -> np.ndarray:
+        """shape int64: the transmitter with the highest coherent (``|sum a e^{-j2pi f tau}|^2``)
+        or incoherent (``sum |a|^2``) path gain; default the map's :attr:`coherent`; -1 inside
+        objects or where no path arrives."""
+        g = self.path_gain_per_tx(coherent)
         filled = np.where(np.isnan(g), -1.0, g)
         best = np.argmax(filled, axis=0)
         reached = np.take_along_axis(filled, best[None], axis=0)[0] > 0
         return np.where(reached & ~self.inside, best, -1)
 
-    def _select(self, per_tx: np.ndarray, tx: int | None) -> np.ndarray:
-        """``per_tx`` (m,) + shape or (3, m) + shape -> that transmitter, or the best server."""
+    def _select(self, per_tx: np.ndarray, tx: int | None, coherent: bool | None = None) -> np.ndarray:
+        """``per_tx`` (m,) + shape or (3, m) + shape -> that transmitter, or the best server
+        of the ``coherent`` reading."""
         axis = per_tx.ndim - len(self.shape) - 1
         if tx is not None:
             if not -self.num_tx <= tx < self.num_tx:
                 raise WavepathsError(f"`tx` must be in 0..{self.num_tx - 1}, got {tx}")
             return np.take(per_tx, tx, axis=axis)
-        best = np.maximum(self.best_server, 0)
+        best = np.maximum(self.best_server_by(coherent), 0)
         idx = best.reshape((1,) * (axis + 1) + best.shape)
         return np.squeeze(np.take_along_axis(per_tx, idx, axis=axis), axis=axis)
 
     def path_gain(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
-        """shape float64: linear path gain of transmitter ``tx``, or of the best server."""
-        return self._select(self.path_gain_per_tx(coherent), tx)
+        """shape float64: linear path gain of transmitter ``tx``, or of the best server.
+
+        The best server is that of the same reading: with ``coherent=False``, the
+        transmitter with the highest power sum (:meth:`best_server_by`), so the map is the
+        highest incoherent gain of all transmitters."""
+        return self._select(self.path_gain_per_tx(coherent), tx, coherent)
+
+    def path_count(self, tx: int | None = None) -> np.ndarray:
+        """shape int64: paths (all mechanisms) reaching each cell from transmitter ``tx``, or
+        from any transmitter when ``tx`` is None; 0 inside objects."""
+        per_tx = self.num_paths.sum(axis=0).astype(np.int64)  # (m,) + shape
+        if tx is not None:
+            if not -self.num_tx <= tx < self.num_tx:
+                raise WavepathsError(f"`tx` must be in 0..{self.num_tx - 1}, got {tx}")
+            count = per_tx[tx]
+        else:
+            count = per_tx.sum(axis=0)
+        return np.where(self.inside, 0, count)
+
+    def without_paths(self, tx: int | None = None) -> np.ndarray:
+        """shape bool: cells outside objects that no path reaches (from ``tx``, or from any
+        transmitter), whatever the quantity read: :meth:`path_count` is 0."""
+        return (self.path_count(tx) == 0) & ~self.inside
 
     def mechanism_gain(self, mechanism: Mechanism, tx: int | None = None) -> np.ndarray:
-        """shape float64: ``sum |a|^2`` over the paths of one mechanism (the incoherent split)."""
+        """shape float64: ``sum |a|^2`` over the paths of one mechanism (the incoherent split).
+
+        Without ``tx``: of the map's best server (:attr:`best_server`, the map's default
+        reading), so that the split belongs to the transmitter :meth:`path_gain` shows."""
         if mechanism not in MECHANISMS:
             raise WavepathsError(f"`mechanism` must be one of {MECHANISMS}, got {mechanism!r}")
         return self._select(self.power_sum, tx)[MECHANISMS.index(mechanism)]
@@ -175,8 +219,51 @@ class CoverageMap:
         """shape float64: received power [dBm] for ``tx_power_dbm``."""
         return self.tx_power_dbm + self.path_gain_db(tx, coherent)
 
+    @property
+    def receive_pattern(self) -> str | None:
+        """The receive antenna's pattern from :attr:`metadata` (``None`` when not recorded)."""
+        ant = self.metadata.get("field_config", {}).get("rx_antenna")
+        return ant.get("pattern") if isinstance(ant, dict) else None
+
+    @property
+    def has_field_strength(self) -> bool:
+        """Whether :meth:`field_strength_dbuv_m` can be read: the map holds the field sums
+        (every map traced now), or, for a map file written before them, its receive antenna
+        is isotropic (or not recorded)."""
+        return self.field_total is not None or self.receive_pattern in (None, "iso")
+
+    def field_gain_per_tx(self, coherent: bool | None = None) -> np.ndarray:
+        """(m,) + shape float64: the squared magnitude of the field at the cell, unit transmit
+        power, normalised like the path gain (free space, isotropic transmitter:
+        ``(lambda / 4 pi d)^2``): ``|sum e e^{-j 2 pi f tau}|^2`` (all polarisations) or
+        ``sum |e|^2``; as :meth:`wavepaths.fields.FieldResult.field_gain`."""
+        if self.field_total is None:
+            raise WavepathsError("this coverage map file holds no field sums (written by an older wavepaths)")
+        if self._coherent(coherent):
+            return np.sum(np.abs(self.field_total) ** 2, axis=-1)
+        return self.field_power_sum
+
     def field_strength_dbuv_m(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
-        """shape float64: field strength [dBuV/m] (isotropic receiver, ``tx_power_dbm``)."""
+        """shape float64: field strength [dBuV/m] for ``tx_power_dbm``: the field at the cell
+        whatever the receive antenna (the transmit antenna's gain included), of transmitter
+        ``tx`` or of the best server (:attr:`best_server`).
+
+        ``E = sqrt(eta_0 P_t 4 pi g) / lambda`` with ``g`` the :meth:`field_gain_per_tx`
+        (:func:`field_strength_dbuv_m` of ``P_t g``, the power an isotropic antenna matched
+        to the field would receive): the magnitude of the total field vector (coherent), or
+        the root of the paths' summed squared magnitudes. The same as
+        :meth:`wavepaths.fields.FieldResult.field_strength` at the cell centre. A map file
+        written before the field sums were kept falls back to the received power, right
+        only for an isotropic receive antenna co-polarised with the field (another receive
+        antenna raises :class:`WavepathsError`).
+        """
+        if self.field_total is not None:
+            g = self._select(self.field_gain_per_tx(coherent), tx)
+            return field_strength_dbuv_m(self.tx_power_dbm + _db(g), self.frequency_hz)
+        if not self.has_field_strength:
+            raise WavepathsError(
+                f"this coverage map file holds no field sums (written by an older wavepaths), and its received "
+                f"power includes its receive antenna ({self.receive_pattern!r}): trace the map again")
         return field_strength_dbuv_m(self.received_power_dbm(tx, coherent), self.frequency_hz)
 
     def mechanism_gain_db(self, mechanism: Mechanism, tx: int | None = None) -> np.ndarray:
@@ -203,6 +290,7 @@ class CoverageMap:
         ``inside`` (shape), ``path_gain_db_per_tx`` ((m,) + shape),
         ``mechanism_gain_db`` ((3, m) + shape, :data:`MECHANISMS` order), ``tx_positions``
         (m, 3), the raw sums ``a_total``, ``a_sum``, ``power_sum``, ``num_paths``,
+        ``field_total``, ``field_power_sum``,
         ``mesh_vertices`` and ``mesh_faces`` for a mesh grid, and ``metadata`` (a JSON
         string).
         """
@@ -225,7 +313,6 @@ class CoverageMap:
         arrays = {
             "path_gain_db": self.path_gain_db(),
             "received_power_dbm": self.received_power_dbm(),
-            "field_strength_dbuv_m": self.field_strength_dbuv_m(),
             "best_server": self.best_server,
             "cell_centers": self.cell_centers,
             "inside": self.inside,
@@ -238,6 +325,11 @@ class CoverageMap:
             "num_paths": self.num_paths,
             "metadata": np.array(json.dumps(meta)),
         }
+        if self.field_total is not None:
+            arrays["field_total"] = self.field_total
+            arrays["field_power_sum"] = self.field_power_sum
+        if self.has_field_strength:
+            arrays["field_strength_dbuv_m"] = self.field_strength_dbuv_m()
         if isinstance(self.grid, MeshGrid):
             arrays["mesh_vertices"] = self.grid.vertices
             arrays["mesh_faces"] = self.grid.faces
@@ -278,6 +370,8 @@ class CoverageMap:
                 a_sum=data["a_sum"],
                 power_sum=data["power_sum"],
                 num_paths=data["num_paths"],
+                field_total=data["field_total"] if "field_total" in data.files else None,
+                field_power_sum=data["field_power_sum"] if "field_power_sum" in data.files else None,
                 frequency_hz=float(meta["frequency_hz"]),
                 tx_power_dbm=float(meta["tx_power_dbm"]),
                 coherent=bool(meta["coherent"]),

@@ -48,8 +48,9 @@ from .inside import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap
 
 # result bytes per cell and transmitter: a_total (16) + a_sum (3 x 16) + power_sum (3 x 8)
-# + num_paths (3 x 4), plus the derived dB maps written by save() (~3 x 8)
-RESULT_BYTES_PER_CELL_TX = 124
+# + num_paths (3 x 4) + field_total (3 x 16) + field_power_sum (8), plus the derived dB maps
+# written by save() (~3 x 8)
+RESULT_BYTES_PER_CELL_TX = 180
 RESULT_BYTES_PER_CELL = 24 + 1 + 8 * 4  # centres, inside mask, best-server maps
 
 
@@ -203,6 +204,11 @@ class TileSums:
     power_sum : (3, m, k) float64
     num_paths : (3, m, k) int32
     stats : dict
+    field_total : (m, k, 3) complex128
+        ``sum e e^{-j 2 pi f tau}``: the paths' field vectors at the cell (transmit port 0,
+        before the receive antenna, normalised like ``a``).
+    field_power_sum : (m, k) float64
+        ``sum |e|^2``.
     """
 
     a_total: np.ndarray
@@ -210,6 +216,8 @@ class TileSums:
     power_sum: np.ndarray
     num_paths: np.ndarray
     stats: dict
+    field_total: np.ndarray | None = None
+    field_power_sum: np.ndarray | None = None
 
 
 def path_mechanism(paths: Paths) -> np.ndarray:
@@ -288,7 +296,7 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     last bit, without gathering every path's vertices into that order first."""
     if not len(paths):
         z = np.zeros(0, np.int64)
-        return z, z, np.zeros(0, complex), np.zeros(0)
+        return z, z, np.zeros(0, complex), np.zeros(0), np.zeros((0, 3), complex)
     order = path_order(paths.tx_index, paths.rx_index, paths.depth, paths.lengths, paths.interactions, paths.primitive,
                        k)
     # a path found once per primitive at a seam counts once, as in trace() (search.paths.coincident_paths)
@@ -299,7 +307,9 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     pair = paths.tx_index * k + paths.rx_index
     key = path_mechanism(paths) * (m * k) + pair
     result = compute_fields(scene, paths, config)
-    return pair[order], key[order], result.a_phased[order], (np.abs(result.a) ** 2)[order]
+    phase = np.exp(-2j * np.pi * result.frequency_hz * paths.delays[order])
+    field = result.incident_field[order, 0, :] * phase[:, None]  # transmit port 0, as a
+    return pair[order], key[order], result.a[order] * phase, (np.abs(result.a) ** 2)[order], field
 
 
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
@@ -313,7 +323,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
     paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
-    pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
+    pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
         keeps = _tolerance_keep(ctx, config, pending, go_power, k, stats)
@@ -322,17 +332,22 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
         paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
-        pair, key, ap, power = _fields_sums(scene, config, paths, m, k)
+        pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at
     a_total = np.bincount(pair, ap.real, m * k) + 1j * np.bincount(pair, ap.imag, m * k)
     a_sum = np.bincount(key, ap.real, n3) + 1j * np.bincount(key, ap.imag, n3)
+    field_total = np.stack([np.bincount(pair, field[:, c].real, m * k) + 1j * np.bincount(pair, field[:, c].imag, m * k)
+                            for c in range(3)], axis=-1)
+    field_power = np.bincount(pair, (np.abs(field) ** 2).sum(axis=1), m * k)
     return TileSums(
         a_total=a_total.reshape(m, k),
         a_sum=a_sum.reshape(3, m, k),
         power_sum=np.bincount(key, power, n3).reshape(3, m, k),
         num_paths=np.bincount(key, minlength=n3).astype(np.int32).reshape(3, m, k),
         stats=dict(stats),
+        field_total=field_total.reshape(m, k, 3),
+        field_power_sum=field_power.reshape(m, k),
     )
 
 
@@ -466,6 +481,8 @@ def coverage(
     a_sum = np.full((3, m, n), np.nan + 0j)
     power_sum = np.full((3, m, n), np.nan)
     num_paths = np.zeros((3, m, n), np.int32)
+    field_total = np.full((m, n, 3), np.nan + 0j)
+    field_power_sum = np.full((m, n), np.nan)
     stats: Counter = Counter(ctx.stats)
     size = cov.tile_size or auto_tile_size(ctx, len(active), cov.workers)
     timings["tile_size"] = size
@@ -481,6 +498,8 @@ def coverage(
         a_sum[:, :, cells] = sums.a_sum
         power_sum[:, :, cells] = sums.power_sum
         num_paths[:, :, cells] = sums.num_paths
+        field_total[:, cells] = sums.field_total
+        field_power_sum[:, cells] = sums.field_power_sum
         stats.update(sums.stats)
         report(len(cells))
 
@@ -512,6 +531,8 @@ def coverage(
         a_sum=a_sum.reshape((3, m) + shape),
         power_sum=power_sum.reshape((3, m) + shape),
         num_paths=num_paths.reshape((3, m) + shape),
+        field_total=field_total.reshape((m,) + shape + (3,)),
+        field_power_sum=field_power_sum.reshape((m,) + shape),
         frequency_hz=cfg.frequency_hz,
         tx_power_dbm=cfg.tx_power_dbm,
         coherent=cov.coherent,

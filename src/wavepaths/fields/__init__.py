@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .chain import path_coefficients, transfer_matrices
+from .chain import coefficients_and_fields, path_coefficients, transfer_matrices
 from .config import FieldConfig
 from .result import FieldResult
 
@@ -30,7 +30,8 @@ def compute_fields(scene: "Scene", paths: "Paths", config: FieldConfig | None = 
     FieldResult
     """
     cfg = config or FieldConfig()
-    return FieldResult(paths, path_coefficients(scene, paths, cfg), cfg.frequency_hz, cfg.tx_power_dbm)
+    a, e = coefficients_and_fields(scene, paths, cfg)
+    return FieldResult(paths, a, cfg.frequency_hz, cfg.tx_power_dbm, incident_field=e)
 
 
 __all__ = ["FieldConfig", "FieldResult", "compute_fields", "path_coefficients", "transfer_matrices"]

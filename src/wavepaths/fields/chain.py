@@ -400,10 +400,25 @@ def path_coefficients(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndar
 
     ``a = (lambda / 4 pi) * spreading * C_rx^H E``; no ``exp(-j 2 pi f tau)`` phase.
     """
+    return coefficients_and_fields(scene, paths, cfg)[0]
+
+
+def coefficients_and_fields(scene: "Scene", paths: Paths, cfg: FieldConfig) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`path_coefficients` and the field each path brings to the receiver, from one chain.
+
+    Returns
+    -------
+    a : (N, Pr, Pt) complex128
+        ``(lambda / 4 pi) * spreading * C_rx^H E``.
+    e : (N, Pt, 3) complex128
+        ``(lambda / 4 pi) * spreading * E``: the field 3-vector at the receiver per transmit
+        port, before the receive antenna, normalised like ``a`` (``a = C_rx^H e``; free space,
+        isotropic transmitter: ``|e| = lambda / 4 pi d``); no ``exp(-j 2 pi f tau)`` phase.
+    """
     E, spreading = path_field_vectors(scene, paths, cfg)
+    e = E * ((cfg.wavelength / (4 * np.pi)) * spreading)[:, None, None]
     C = antenna_field_vectors(cfg.rx_antenna, -paths.arrival_directions, compiled=cfg.compiled)  # (N, Pr, 3)
-    v = np.einsum("nrj,ntj->nrt", np.conj(C), E)
-    return (cfg.wavelength / (4 * np.pi)) * spreading[:, None, None] * v
+    return np.einsum("nrj,ntj->nrt", np.conj(C), e), e
 
 
 def transfer_matrices(scene: "Scene", paths: Paths, cfg: FieldConfig) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -37,7 +39,8 @@ class FieldConfig:
         thickness (as Sionna RT), or a half-space.
     tx_antenna, rx_antenna : Antenna
     tx_power_dbm : float
-        Transmit power for received power and field strength [dBm].
+        Transmit power for received power and field strength [dBm]; finite (NaN or
+        infinity raise :class:`~wavepaths.errors.WavepathsError`).
     compiled : bool
         Run the reflections and the ``"utd"`` diffraction (without the Sionna compat mode)
         in the compiled kernels of :mod:`wavepaths.fields.compiled` when numba is installed
@@ -62,6 +65,9 @@ class FieldConfig:
             raise WavepathsError(f"`compat` must be one of ('none', 'sionna'), got {self.compat!r}")
         if self.reflection_model not in ("slab", "half_space"):
             raise WavepathsError(f"`reflection_model` must be one of ('slab', 'half_space'), got {self.reflection_model!r}")
+        if isinstance(self.tx_power_dbm, bool) or not isinstance(self.tx_power_dbm, numbers.Real) \
+                or not math.isfinite(self.tx_power_dbm):
+            raise WavepathsError(f"`tx_power_dbm` must be a finite number [dBm], got {self.tx_power_dbm!r}")
 
     @property
     def wavelength(self) -> float:

@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import WavepathsError
 from ..search.paths import Paths
 
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
+    from .config import FieldConfig
+
 ETA_0 = 376.730313668  # free-space impedance [ohm]
+SPEED_OF_LIGHT = 299_792_458.0  # [m/s]
 
 
 def power_db(x: np.ndarray) -> np.ndarray:
@@ -18,6 +25,55 @@ def power_db(x: np.ndarray) -> np.ndarray:
     pos = x > 0
     out[pos] = 10 * np.log10(x[pos])
     return out
+
+
+def field_strength_v_m(field_gain: np.ndarray, tx_power_dbm: float, frequency_hz: float) -> np.ndarray:
+    """RMS field strength [V/m] from a field gain.
+
+    Parameters
+    ----------
+    field_gain : array_like of float
+        Squared magnitude of the incident field for unit transmit power, normalised like
+        the path coefficients ``a`` (see :meth:`FieldResult.field_gain`) [1].
+    tx_power_dbm : float
+        Transmit power [dBm].
+    frequency_hz : float
+        Carrier frequency [Hz].
+
+    Returns
+    -------
+    ndarray of float
+        ``E = sqrt(eta_0 P_t 4 pi g) / lambda`` [V/m]: the power ``P_t g`` an isotropic,
+        matched receiver would collect over its effective area ``lambda^2 / 4 pi``, as a
+        field. NaN passes through.
+    """
+    lam = SPEED_OF_LIGHT / frequency_hz
+    pt = 1e-3 * 10 ** (tx_power_dbm / 10)
+    return np.sqrt(ETA_0 * 4 * np.pi * pt * np.asarray(field_gain, dtype=float)) / lam
+
+
+def incident_fields(scene: "Scene", paths: Paths, config: "FieldConfig") -> np.ndarray:
+    """Field 3-vector of each path at the receiver, before the receive antenna.
+
+    Parameters
+    ----------
+    scene : Scene
+    paths : Paths
+        From :func:`wavepaths.trace` on ``scene``.
+    config : FieldConfig
+        Its receive antenna plays no part.
+
+    Returns
+    -------
+    (N, Pt, 3) complex128
+        ``e = (lambda / 4 pi) * spreading * E`` per transmit port, in the normalisation of
+        the path coefficients (``a = C_rx^H e``, :func:`wavepaths.fields.path_coefficients`;
+        free space, isotropic transmitter: ``|e| = lambda / 4 pi d``), without the
+        ``exp(-j 2 pi f tau)`` phase.
+    """
+    from .chain import coefficients_and_fields
+
+    return coefficients_and_fields(scene, paths, config)[1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,12 +89,31 @@ class FieldResult:
         ``Paths.a`` (unit transmit power, no ``exp(-j 2 pi f tau)`` phase).
     frequency_hz : float
     tx_power_dbm : float
+    incident_field : (N, Pt, 3) complex128 or None
+        Field 3-vector of each path at the receiver, before the receive antenna, per
+        transmit port, in the normalisation of ``a_ports`` (``a = C_rx^H e``, with ``C_rx``
+        the receive pattern; :func:`incident_fields`). :func:`wavepaths.fields.compute_fields`
+        fills it from the same chain as ``a_ports``. It makes :meth:`field_strength`
+        independent of the receive antenna; ``None`` for a result built without it.
     """
 
     paths: Paths
     a_ports: np.ndarray
     frequency_hz: float
     tx_power_dbm: float
+    incident_field: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.incident_field is not None:
+            e = np.asarray(self.incident_field)
+            want = (self.a_ports.shape[0], self.a_ports.shape[2], 3)
+            if e.shape != want:
+                raise WavepathsError(f"`incident_field` must have shape {want} (N, Pt, 3), got {e.shape}")
+
+    def with_incident_field(self, scene: "Scene", config: "FieldConfig") -> "FieldResult":
+        """This result with :attr:`incident_field` computed for ``scene`` and ``config`` (those
+        the coefficients came from), so that :meth:`field_strength` is the field itself."""
+        return replace(self, incident_field=incident_fields(scene, self.paths, config))
 
     @property
     def a(self) -> np.ndarray:
@@ -82,18 +157,45 @@ class FieldResult:
         """(m, n) received power [dBm] for ``tx_power_dbm``."""
         return self.tx_power_dbm + self.path_gain_db(coherent)
 
+    def field_gain(self, coherent: bool = True) -> np.ndarray:
+        """(m, n) linear "field gain" [1]: the incident field at the receiver, squared, for unit
+        transmit power, in the normalisation of ``a`` (free space: ``G_t (lambda / 4 pi d)^2``).
+
+        With :attr:`incident_field` (transmit port 0), independent of the receive antenna:
+        ``|sum_i e_i exp(-j 2 pi f tau_i)|^2`` with ``e_i`` the paths' field 3-vectors, the
+        magnitude of the total field vector at the receiver (all polarisations; ``coherent``),
+        or ``sum_i |e_i|^2`` (the power sum). Without it, :meth:`path_gain`, which includes the
+        receive antenna's gain and polarisation (equal to the above only for an isotropic,
+        co-polarised receive antenna).
+        """
+        if self.incident_field is None:
+            return self.path_gain(coherent)
+        e = self.incident_field[:, 0, :]
+        if coherent:
+            phase = np.exp(-2j * np.pi * self.frequency_hz * self.delays)
+            total = np.stack([self._pair_sum(e[:, c] * phase) for c in range(3)], axis=-1)
+            return np.sum(np.abs(total) ** 2, axis=-1)
+        return self._pair_sum(np.sum(np.abs(e) ** 2, axis=-1))
+
     def field_strength(self, coherent: bool = True) -> np.ndarray:
         """(m, n) RMS field strength [V/m] at the receiver for ``tx_power_dbm``.
 
-        From the received power of an isotropic receiver, whose effective area is
-        ``lambda^2 / 4 pi``: ``E = sqrt(eta_0 P_r 4 pi) / lambda``.
+        The field an isotropic receiver sees, independent of the receive antenna (the
+        transmit antenna's gain is in): ``E = sqrt(eta_0 P_t 4 pi g) / lambda`` with ``g``
+        the :meth:`field_gain` (for a power ``P_r = P_t g`` that an isotropic antenna
+        matched to the field would receive, whose effective area is ``lambda^2 / 4 pi``;
+        free space: ``E = sqrt(eta_0 P_t G_t / 4 pi) / d``). Coherent: the magnitude of the
+        vector sum of the paths' fields (each with ``exp(-j 2 pi f tau)``); otherwise the
+        root of the sum of their squared magnitudes.
+
+        Exact when the result holds :attr:`incident_field` (see :func:`incident_fields`,
+        :meth:`with_incident_field`); without it, from :meth:`path_gain`, which is right
+        only for an isotropic receive antenna co-polarised with the field.
         """
-        pr = 1e-3 * 10 ** (self.received_power_dbm(coherent) / 10)
-        lam = 299_792_458.0 / self.frequency_hz
-        return np.sqrt(ETA_0 * pr * 4 * np.pi) / lam
+        return field_strength_v_m(self.field_gain(coherent), self.tx_power_dbm, self.frequency_hz)
 
     def field_strength_dbuv_m(self, coherent: bool = True) -> np.ndarray:
-        """(m, n) field strength [dBuV/m]."""
+        """(m, n) field strength [dBuV/m] (see :meth:`field_strength`); ``-inf`` where no path arrives."""
         e = self.field_strength(coherent)
         with np.errstate(divide="ignore"):
             return 20 * np.log10(e * 1e6)
