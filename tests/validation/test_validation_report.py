@@ -53,6 +53,33 @@ def test_quick_validation_passes_its_tolerances(quick_report):
     assert d["cases"] and (out / "report.html").stat().st_size > 50_000  # tables and embedded plots
 
 
+def test_validation_json_is_strict_and_the_report_is_rebuilt_from_it(quick_report):
+    import re
+
+    from wavepaths.validation.figures import report_figures
+
+    out, summary = quick_report
+
+    def refuse(token):
+        raise ValueError(f"not JSON: {token}")
+
+    d = json.loads((out / "validation.json").read_text(), parse_constant=refuse)  # as JSON.parse reads it
+    assert d == summary
+    page = (out / "report.html").read_text()
+    embedded = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)
+    assert sorted(embedded) == sorted(report_figures(d).values())
+
+
+def test_the_exact_solutions_decide_who_matches(quick_report):
+    _, summary = quick_report
+    exact = summary["exact_comparison"]
+    assert exact["passed"], exact["violations"]
+    assert summary["passed"] == (summary["cases_passed"] and exact["passed"])
+    known = exact["known_disagreements"]
+    for k in ("hard-polarisation-coefficient", "reflection-boundary-jump", "both-faces-lit-face-choice"):
+        assert known[k]["matches_exact"] == "wavepaths UTD", (k, known[k])
+
+
 def test_every_sionna_path_is_found_by_wavepaths(quick_report):
     from wavepaths.validation.report import SIONNA_ONLY_FAILURE
 

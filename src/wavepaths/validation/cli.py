@@ -22,6 +22,12 @@ def _run(args) -> int:
             s = r["comparison_compat"]
             print(f"{c['name']:<22} {pol}  matched {s['matched']:>4}  only wavepaths {s['only_wavepaths']:>4}  "
                   f"only Sionna {s['only_sionna']:>3}  {'pass' if r['passed'] else 'FAIL'}")
+    exact = summary["exact_comparison"]
+    for name, fields in exact["lines"].items():
+        for field, v in fields.items():
+            errs = "  ".join(f"{e} {x['max_db']:.3g} dB" for e, x in v["engines"].items() if x["max_db"] is not None)
+            print(f"exact {name:<16} {field}  {errs}  matches the exact solution: {v['matches_exact']}")
+    print(f"exact solutions: {exact['held_engine']} {'pass' if exact['passed'] else 'FAIL'}")
     print("PASS" if summary["passed"] else "FAIL")
     return 0 if summary["passed"] else 1
 

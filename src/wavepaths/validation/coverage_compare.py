@@ -63,7 +63,11 @@ def compare_coverage(scene_xml: str, tx, center, size, cell: float, max_depth: i
 
 
 def coverage_figure(result: dict) -> str:
-    """Base64 PNG: wavepaths, Sionna and their difference, with and without diffraction."""
+    """Base64 PNG: wavepaths, Sionna and their difference, with and without diffraction.
+
+    ``result`` is :func:`compare_coverage`'s, or the report's ``coverage`` entry read back from
+    ``validation.json`` (maps as nested lists, ``null`` for non-finite cells).
+    """
     import base64
     import io
 
@@ -77,19 +81,21 @@ def coverage_figure(result: dict) -> str:
     cx, cy = result["center"][:2]
     ext = None
     for row, (name, r) in zip(axes, runs.items()):
-        ny, nx = r["wavepaths_db"].shape
+        # a non-finite cell (-inf: no path; NaN: not compared) is blank either way
+        maps = {key: np.asarray(r[key], dtype=float) for key in ("wavepaths_db", "sionna_db", "difference_db")}
+        ny, nx = maps["wavepaths_db"].shape
         c = result["cell_m"]
         ext = [cx - nx * c / 2, cx + nx * c / 2, cy - ny * c / 2, cy + ny * c / 2]
-        vmin = np.nanpercentile(np.where(np.isfinite(r["sionna_db"]), r["sionna_db"], np.nan), 2)
-        vmax = np.nanmax(np.where(np.isfinite(r["sionna_db"]), r["sionna_db"], np.nan))
+        vmin = np.nanpercentile(np.where(np.isfinite(maps["sionna_db"]), maps["sionna_db"], np.nan), 2)
+        vmax = np.nanmax(np.where(np.isfinite(maps["sionna_db"]), maps["sionna_db"], np.nan))
         for ax, key, title in ((row[0], "wavepaths_db", "wavepaths (exact paths, power sum)"),
                                (row[1], "sionna_db", "Sionna RT RadioMapSolver")):
-            im = ax.imshow(np.where(np.isfinite(r[key]), r[key], np.nan), origin="lower", extent=ext,
+            im = ax.imshow(np.where(np.isfinite(maps[key]), maps[key], np.nan), origin="lower", extent=ext,
                            vmin=vmin, vmax=vmax, cmap="viridis")
             ax.plot(*result["tx"][:2], "r*", ms=12)
             ax.set_title(f"{title}, {name.replace('_', ' ')}", fontsize=9)
             fig.colorbar(im, ax=ax, label="path gain [dB]")
-        im = row[2].imshow(r["difference_db"], origin="lower", extent=ext, vmin=-6, vmax=6, cmap="RdBu_r")
+        im = row[2].imshow(maps["difference_db"], origin="lower", extent=ext, vmin=-6, vmax=6, cmap="RdBu_r")
         row[2].set_title(f"wavepaths - Sionna [dB]: median {r['median_db']:.2f}, std {r['std_db']:.2f}", fontsize=9)
         fig.colorbar(im, ax=row[2], label="dB")
     for ax in axes.ravel():

@@ -1,13 +1,22 @@
 """Known disagreements between wavepaths and Sionna RT 2.2, each with its reason.
 
-``tests/validation/test_known_disagreements.py`` runs each one as a strict expected
-failure: the day Sionna RT and wavepaths agree on one of them, that test fails loudly and
-the entry must be removed.
+``exact_lines`` names the boundary lines of the report (``(line, field)``,
+:mod:`wavepaths.validation.lines`) on which a disagreement shows against an exact solution:
+the report computes from those lines' measured errors which engine matches the exact
+solution (:func:`wavepaths.validation.verdict.known_disagreement_verdicts`).
+``who_matches_exact`` is the documented answer (and the only one for the entries no line of
+the report measures, each with the test that checks it).
+
+``tests/validation/`` runs them as strict expected failures (``test_validation_report.py``)
+or checks the exact solution behind them (``test_non_manifold_edges.py``,
+``test_sionna_screen_collapse.py``): the day Sionna RT and wavepaths agree on one of them,
+its test fails loudly and the entry must be removed.
 """
 
 KNOWN_DISAGREEMENTS = [
     {
         "id": "hard-polarisation-coefficient",
+        "exact_lines": [("half_plane", "hard")],
         "what": "Diffracted |a| for E perpendicular to the edge (hard) differs from Kouyoumjian-Pathak by up to "
                 "tens of dB near the faces",
         "reason": "Sionna RT 2.2 combines the UTD terms as R0 (d1 - d4) + Rn (d2 - d3) in reflected bases; for a "
@@ -17,6 +26,7 @@ KNOWN_DISAGREEMENTS = [
     },
     {
         "id": "reflection-boundary-jump",
+        "exact_lines": [("half_plane", "soft")],
         "what": "Sionna's total field jumps by about twice the incident amplitude across every reflection boundary",
         "reason": "The 0-face reflection-boundary term d4 enters with -R0 instead of +R0, so the diffracted field's "
                   "half-jump adds to the reflected field's jump instead of cancelling it "
@@ -25,6 +35,7 @@ KNOWN_DISAGREEMENTS = [
     },
     {
         "id": "both-faces-lit-face-choice",
+        "exact_lines": [("wedge", "soft"), ("wedge", "hard")],
         "what": "On a wedge whose two faces are both lit, Sionna's diffracted field depends on which face its "
                 "sampled ray hit",
         "reason": "Sionna takes the face its candidate ray hit as the 0-face, and its combination "

@@ -136,6 +136,15 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
     return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds)
 
 
+# the antenna polarisation of a line's curves and the physical field it gives (module docstring)
+FIELD_OF_POLARIZATION = {"H": "soft", "V": "hard"}
+
+
+def curve_key(label: str, polarization: str) -> str:
+    """The report's name of one curve: ``"wavepaths UTD (soft)"`` for ``("wavepaths UTD", "H")``."""
+    return f"{label} ({FIELD_OF_POLARIZATION[polarization]})"
+
+
 def line_errors(line: BoundaryLine) -> dict:
     """Largest and median |u| difference in dB from the exact solution, per engine and polarisation."""
     out = {}
@@ -145,8 +154,34 @@ def line_errors(line: BoundaryLine) -> dict:
         ref = line.curves[("exact", pol)]
         d = 20 * np.log10(np.maximum(np.abs(u), 1e-12) / np.maximum(np.abs(ref), 1e-12))
         lit = np.abs(ref) > 0.05  # skip the deep nulls of the exact field
-        out[f"{label} ({'soft' if pol == 'H' else 'hard'})"] = {
+        out[curve_key(label, pol)] = {
             "max_db": float(np.max(np.abs(d[lit]))), "median_db": float(np.median(np.abs(d[lit]))),
             "max_complex_error": float(np.max(np.abs(u - ref))),
         }
+    return out
+
+
+def line_summary(line: BoundaryLine) -> dict:
+    """The JSON entry of one line: its errors (:func:`line_errors`) and everything its figure needs.
+
+    ``curves`` maps :func:`curve_key` (``"exact (soft)"``, ``"Sionna RT (hard)"``, ...) to the
+    complex ``u`` along the circle as two lists, ``{"re": (k,), "im": (k,)}``, one value per
+    ``phi_deg``; :func:`curves_from_summary` reads them back.
+    """
+    return {"errors": line_errors(line), "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
+            "boundaries_deg": {k: float(v) for k, v in line.boundaries_deg.items()}, "k_rho": float(line.k_rho),
+            "curves": {curve_key(label, pol): {"re": np.real(u).tolist(), "im": np.imag(u).tolist()}
+                       for (label, pol), u in line.curves.items()}}
+
+
+def curves_from_summary(entry: dict) -> dict:
+    """``(label, polarization) -> (k,) complex u`` from a :func:`line_summary` entry (as read from JSON).
+
+    A ``null`` (a non-finite value, ``validation/json_io.py``) comes back as NaN.
+    """
+    out = {}
+    for key, c in entry["curves"].items():
+        label, field = key.rsplit(" (", 1)
+        pol = {v: k for k, v in FIELD_OF_POLARIZATION.items()}[field.rstrip(")")]
+        out[(label, pol)] = np.asarray(c["re"], dtype=float) + 1j * np.asarray(c["im"], dtype=float)
     return out
