@@ -93,6 +93,11 @@ SIONNA_ONLY_FAILURE = "found by Sionna only: not found by wavepaths (a failure)"
 SIONNA_ONLY_NOT_A_WEDGE = ("not a wedge: Sionna diffracts on an edge whose free-space angle around E and R is at most "
                            "pi (flat or concave, n <= 1: no shadow boundary, UTD's D vanishes at n = 1 and is not "
                            "defined below); wavepaths diffracts only into sectors wider than pi (seed §3.2)")
+SIONNA_ONLY_THROUGH_EDGE = ("through an edge: a leg of Sionna's path crosses a face exactly at that face's edge "
+                            "(a receiver on the shadow boundary of a window's jamb, say): wavepaths' occlusion rule "
+                            "blocks a segment that crosses a closed triangle through its edge or vertex (no leak "
+                            "between the two triangles of a wall; docs/stress.md, 'What blocks a segment'), Sionna's "
+                            "ray passes; 1e-4 m to the open side both engines keep the path")
 SIONNA_ONLY_OWN_FACE = ("own face: Sionna reflects the diffracted ray off a face of the wedge it diffracts on (the "
                         "ray runs along that face, at grazing incidence: a ray into the wedge's exterior never meets "
                         "the wedge's own faces, seed §3.2; such a path carries no field)")
@@ -279,7 +284,56 @@ def _explain_sionna_only(scene, sn, j: int, sectors=None) -> str:
     # Sionna's float32 points lie within about 1e-5 m of the sides they are on at these scales
     if _sionna_own_face(scene, sn, j, k, 1e-3):
         return SIONNA_ONLY_OWN_FACE
+    if _crosses_faces_only_at_edges(scene, sn.vertices[j, : sn.num_interactions[j] + 2], 1e-4):
+        return SIONNA_ONLY_THROUGH_EDGE
     return SIONNA_ONLY_FAILURE
+
+
+def _crosses_faces_only_at_edges(scene, vertices: np.ndarray, tol: float) -> bool:
+    """Whether a path's legs cross some face, and every face they cross, within ``tol`` [m] of
+    that face's boundary (the legs' own end points on their faces do not count: a leg's
+    crossings are taken at least ``tol`` from its ends).
+
+    The occlusion rule blocks a segment crossing a closed triangle, at its edge too; Sionna's
+    ray at exactly that edge passes. Within ``tol`` of an edge the two verdicts are a
+    convention on the boundary of the edge's shadow, not a missed path.
+    """
+    V = scene.vertices[scene.triangles]
+    e1, e2 = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
+    n = np.cross(e1, e2)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    at_edge = 0
+    for a, b in zip(vertices[:-1], vertices[1:]):
+        length = float(np.linalg.norm(b - a))
+        if length <= 2 * tol:
+            continue
+        da = np.einsum("ij,ij->i", a - V[:, 0], n)
+        db = np.einsum("ij,ij->i", b - V[:, 0], n)
+        t = np.where(da != db, da / np.where(da != db, da - db, 1.0), -1.0)
+        hit = (t * length > tol) & ((1.0 - t) * length > tol)
+        for i in np.nonzero(hit)[0]:
+            x = a + t[i] * (b - a)
+            # the distance from x to the triangle (0 inside) and to its boundary
+            dist_in, dist_edge = _triangle_distances(V[i], x)
+            if dist_in > tol:
+                continue  # passes beside the triangle
+            if dist_edge > tol:
+                return False  # through its interior: a real blocker
+            at_edge += 1
+    return at_edge > 0
+
+
+def _triangle_distances(tri: np.ndarray, x: np.ndarray) -> tuple[float, float]:
+    """(distance from ``x`` to the closed triangle's region in its plane (0 inside), distance
+    to its boundary) [m], for ``x`` in the triangle's plane."""
+    edges = []
+    for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+        e = b - a
+        s = np.clip((x - a) @ e / (e @ e), 0.0, 1.0)
+        edges.append(float(np.linalg.norm(x - a - s * e)))
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    inside = all(np.cross(b - a, x - a) @ n >= 0 for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])))
+    return (0.0 if inside else min(edges)), min(edges)
 
 
 def run_case(case: Case, out_dir: str) -> dict:
