@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from wavepaths.em.materials import PEC
 from wavepaths.scene import build_scene
+
+
+def strict_json(text: str):
+    """json.loads that refuses NaN, Infinity and -Infinity (which JSON does not have)."""
+    def refuse(name):
+        raise ValueError(f"not JSON: {name}")
+
+    return json.loads(text, parse_constant=refuse)
 
 
 def quads_scene(quads, objects=None, source="test"):

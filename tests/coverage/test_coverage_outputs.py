@@ -4,7 +4,6 @@ clear errors from the command line."""
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -18,6 +17,8 @@ from wavepaths.coverage.plot import plane_axes, plot_coverage
 from wavepaths.em.antennas import Antenna
 from wavepaths.fields import FieldConfig, compute_fields
 
+from ..conftest import strict_json
+
 WAVEPATHS = os.path.join(os.path.dirname(sys.executable), "wavepaths")
 IN_PROCESS = CoverageOptions(workers=1)
 NO_DIFFRACTION = TraceOptions(max_reflections=1, diffraction=False)
@@ -25,14 +26,6 @@ NO_DIFFRACTION = TraceOptions(max_reflections=1, diffraction=False)
 
 def run(*args):
     return subprocess.run([WAVEPATHS, "coverage", *map(str, args)], capture_output=True, text=True, timeout=300)
-
-
-def strict_json(text: str):
-    """json.loads that refuses NaN, Infinity and -Infinity (which JSON does not have)."""
-    def refuse(name):
-        raise ValueError(f"not JSON: {name}")
-
-    return json.loads(text, parse_constant=refuse)
 
 
 @pytest.fixture(scope="module")

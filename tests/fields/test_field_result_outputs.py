@@ -4,7 +4,6 @@ transmit power."""
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -18,7 +17,7 @@ from wavepaths.em.antennas import Antenna
 from wavepaths.fields import FieldConfig, compute_fields
 from wavepaths.fields.result import ETA_0, FieldResult
 
-from ..conftest import quads_scene
+from ..conftest import quads_scene, strict_json
 
 WAVEPATHS = os.path.join(os.path.dirname(sys.executable), "wavepaths")
 PATTERNS = ("iso", "dipole", "hw_dipole", "tr38901")
@@ -26,14 +25,6 @@ PATTERNS = ("iso", "dipole", "hw_dipole", "tr38901")
 
 def run_paths(*args):
     return subprocess.run([WAVEPATHS, "paths", *map(str, args)], capture_output=True, text=True, timeout=300)
-
-
-def strict_json(text: str):
-    """json.loads that refuses NaN, Infinity and -Infinity (which JSON does not have)."""
-    def refuse(name):
-        raise ValueError(f"not JSON: {name}")
-
-    return json.loads(text, parse_constant=refuse)
 
 
 def far_los(d=200.0):

@@ -230,19 +230,7 @@ def _split_t_junctions(scene: "Scene"):
     o = np.lexsort((t, ei))
     vi, ei = vi[o], ei[o]
     split = np.unique(ei)
-    inner = np.bincount(ei, minlength=len(E))[split]  # interior vertices per split edge
-    # node chains: start, interior vertices by t, end; pieces between consecutive nodes
-    n_nodes = inner + 2
-    node_ptr = np.concatenate([[0], np.cumsum(n_nodes)])
-    nodes = np.empty(int(node_ptr[-1]), dtype=np.int64)
-    nodes[node_ptr[:-1]] = E[split, 0]
-    nodes[node_ptr[1:] - 1] = E[split, 1]
-    pos = np.arange(len(vi)) - np.repeat(np.cumsum(inner) - inner, inner)
-    nodes[np.repeat(node_ptr[:-1], inner) + 1 + pos] = vi
-    n_pieces = inner + 1
-    piece_parent = np.repeat(split, n_pieces)
-    first = np.repeat(node_ptr[:-1], n_pieces) + (np.arange(int(n_pieces.sum())) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces))
-    pieces = np.stack([nodes[first], nodes[first + 1]], axis=1)
+    pieces, piece_parent = _cut(E, split, np.bincount(ei, minlength=len(E))[split], vi)
     whole = np.setdiff1d(np.arange(len(E)), split)
     parent = np.concatenate([whole, piece_parent])
     pairs = np.sort(np.concatenate([E[whole], pieces]), axis=1)
@@ -396,23 +384,13 @@ def _split_at_polygon_borders(scene: "Scene", verts: np.ndarray, edges: np.ndarr
     new[1:] = (pe[1:] != pe[:-1]) | (t[1:] - t[:-1] > tol)
     pe, t = pe[new], t[new]
     split = np.unique(pe)
-    inner = np.bincount(pe, minlength=len(edges))[split]
     vid = len(verts) + np.arange(len(pe))
     verts = np.concatenate([verts, a[pe] + t[:, None] * w[pe]])
-    n_nodes = inner + 2
-    node_ptr = np.concatenate([[0], np.cumsum(n_nodes)])
-    nodes = np.empty(int(node_ptr[-1]), dtype=np.int64)
-    nodes[node_ptr[:-1]] = edges[split, 0]
-    nodes[node_ptr[1:] - 1] = edges[split, 1]
-    pos = np.arange(len(pe)) - np.repeat(np.cumsum(inner) - inner, inner)
-    # the nodes run from edges[., 0] to edges[., 1], the direction t is measured in
-    nodes[np.repeat(node_ptr[:-1], inner) + 1 + pos] = vid
-    n_pieces = inner + 1
-    k = np.arange(int(n_pieces.sum())) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces)
-    first = np.repeat(node_ptr[:-1], n_pieces) + k
-    pieces = np.sort(np.stack([nodes[first], nodes[first + 1]], axis=1), axis=1)
+    # the crossings run from edges[., 0] to edges[., 1], the direction t is measured in
+    pieces, piece_parent = _cut(edges, split, np.bincount(pe, minlength=len(edges))[split], vid)
+    pieces = np.sort(pieces, axis=1)
     whole = np.setdiff1d(np.arange(len(edges)), split)
-    parent = np.concatenate([whole, np.repeat(split, n_pieces)])
+    parent = np.concatenate([whole, piece_parent])
     out_edges = np.concatenate([edges[whole], pieces])
     # each piece carries its parent's entries
     e_ptr = np.concatenate([[0], np.cumsum(np.bincount(entry_edge, minlength=len(edges)))])
@@ -420,6 +398,26 @@ def _split_at_polygon_borders(scene: "Scene", verts: np.ndarray, edges: np.ndarr
     row = np.repeat(np.arange(len(parent)), c)
     src = np.repeat(e_ptr[parent], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
     return (verts, out_edges.astype(np.int64), row.astype(np.int64), entry_tri[src], entry_side[src], int(len(pe)))
+
+
+def _cut(edges: np.ndarray, split: np.ndarray, inner: np.ndarray, nodes_inside: np.ndarray):
+    """The pieces of the edges ``split`` (rows of ``edges``, end vertex ids) cut at their interior
+    nodes: ``nodes_inside`` holds vertex ids grouped by edge, ``inner[i]`` of them for
+    ``split[i]``, in order from ``edges[., 0]`` to ``edges[., 1]``.
+
+    Returns ``(pieces, parent)``: (p, 2) int64 end vertex ids of each piece (between consecutive
+    nodes of its edge's chain: start, interior nodes, end) and (p,) the edge it comes from.
+    """
+    node_ptr = np.concatenate([[0], np.cumsum(inner + 2)])
+    nodes = np.empty(int(node_ptr[-1]), dtype=np.int64)
+    nodes[node_ptr[:-1]] = edges[split, 0]
+    nodes[node_ptr[1:] - 1] = edges[split, 1]
+    pos = np.arange(len(nodes_inside)) - np.repeat(np.cumsum(inner) - inner, inner)
+    nodes[np.repeat(node_ptr[:-1], inner) + 1 + pos] = nodes_inside
+    n_pieces = inner + 1
+    k = np.arange(int(n_pieces.sum())) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces)
+    first = np.repeat(node_ptr[:-1], n_pieces) + k
+    return np.stack([nodes[first], nodes[first + 1]], axis=1), np.repeat(split, n_pieces)
 
 
 def build_dihedra(scene: "Scene") -> Dihedra:
