@@ -119,3 +119,32 @@ def test_builtin_scenes_load_and_have_closed_bounds(name):
     assert sum(info["dihedra_by_face_count"].values()) == info["dihedra"]
     lo, hi = np.array(info["bounds"])
     assert (hi >= lo).all()
+
+
+def test_a_finely_faceted_object_survives_welding_in_a_large_scene():
+    """A 30 m round tower of 400 facets (1.6 cm wide) on a 20 km ground: the weld tolerance is
+    2 cm (1e-6 of the diagonal), so its ring vertices form one chain of 'closer than' pairs.
+    Merged transitively the chain collapsed the tower to a point and every one of its 1,600
+    triangles was dropped (found by a review); welded greedily, each vertex moves by at most
+    the tolerance and the tower keeps its shape (a coarser ring), with a warning."""
+    from wavepaths.em.materials import PEC
+    from wavepaths.scene.builtin import SceneBuilder
+    from wavepaths.scene.model import WavepathsWarning, build_scene
+
+    n = 400
+    ang = 2 * np.pi * np.arange(n) / n
+    ring = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    verts = np.concatenate([np.c_[ring, np.zeros(n)], np.c_[ring, np.full(n, 30.0)]])
+    tris = [[i, (i + 1) % n, n + i] for i in range(n)] + [[(i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    b = SceneBuilder()
+    b.add_quad("ground", PEC, [(-1e4, -500, 0), (1e4, -500, 0), (1e4, 500, 0), (-1e4, 500, 0)])
+    b.add_mesh("tower", PEC, verts, tris)
+    with pytest.warns(WavepathsWarning, match="zero-area"):
+        scene = build_scene(*b.arrays())
+    tower = scene.triangle_object == scene.object_names.index("tower")
+    assert tower.sum() >= n  # at least half the facets remain (pairs of ring vertices merge)
+    used = scene.vertices[np.unique(scene.triangles[tower])]
+    tol = scene.tolerances.weld * scene.diagonal
+    r = np.linalg.norm(used[:, :2], axis=1)
+    assert np.all(np.abs(r - 1.0) <= tol) and used[:, 2].max() == pytest.approx(30.0, abs=tol)
+    assert np.ptp(used[:, 0]) > 2.0 - 2 * tol and np.ptp(used[:, 1]) > 2.0 - 2 * tol

@@ -267,7 +267,9 @@ def build_scene(
     bad = degenerate_triangles(welded, triangles, (tol.weld * diagonal) ** 2)
     dropped = int(bad.sum())
     if dropped:
-        warnings.warn(f"{where}dropped {dropped} zero-area triangle(s)", WavepathsWarning, stacklevel=2)
+        warnings.warn(f"{where}dropped {dropped} zero-area triangle(s) (after welding the vertices closer than "
+                      f"{tol.weld * diagonal:.3g} m, {tol.weld:g} of the scene's diagonal: detail finer than that is "
+                      f"below the scene's resolution)", WavepathsWarning, stacklevel=2)
         triangles = triangles[~bad]
         triangle_object = triangle_object[~bad]
         triangle_material = triangle_material[~bad]
