@@ -91,8 +91,8 @@ class EdgeInstances:
 def random_instances(n: int, seed: int = 0, box: float = 10.0) -> EdgeInstances:
     """``n`` pairs E, R and edges AB with all four points uniform in ``[-box, box]^3`` [m].
 
-    About a third of the pairs have their diffraction point on the segment; the others
-    test the on-edge rejection.
+    About 72 % of the pairs have their diffraction point on the segment (0.724 of 10,000 in
+    the benchmark's draw); the others test the on-edge rejection.
     """
     rng = np.random.default_rng(seed)
     e, r, a, b = (rng.uniform(-box, box, (n, 3)) for _ in range(4))

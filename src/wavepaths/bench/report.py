@@ -99,6 +99,7 @@ def headline(results: dict) -> dict:
         "sionna_paths_time_ratio": sp.get("sionna_paths_time_ratio"),
         "diffraction_cost_ratio": dc.get("diffraction_cost_ratio"),
         "diffraction_cost_ratio_seed_case": dc.get("seed_case_ratio"),
+        "diffraction_cost_ratio_seed_case_one_thread": dc.get("seed_case_ratio_one_thread"),
         "diffraction_cost_ratio_one_thread": dc.get("diffraction_cost_ratio_one_thread"),
         # what the headline ratio would be on one thread if finding the diffracted paths cost
         # nothing beyond their fields and casts (diffraction_cost.cost_floor)

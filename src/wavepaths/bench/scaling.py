@@ -235,7 +235,8 @@ def _analysis(out: dict) -> str:
     if e2 is not None:
         parts.append(f"Triangles, R2+D1: time ~ T^{e2:.2f}; the largest counters are the diffraction receiver pairs "
                      "(receiver images x dihedra, both growing with T) and the candidates of the join with the "
-                     "transmitter's images, so diffraction with reflections dominates and grows as T^2 per receiver.")
+                     "transmitter's images, so diffraction with reflections dominates: its pair counts grow as T^2 per "
+                     "receiver, the culling tests keep the time's growth near the fitted exponent.")
     failed = [r for r in t["default"]["points"] if "error" in r]
     if failed:
         r = failed[0]

@@ -8,7 +8,7 @@ Both engines read the same Mitsuba XML file:
 * ``etoile_crop``: the buildings of Sionna RT's ``etoile`` scene that lie entirely inside
   a square around a centre, plus its ground (whole objects are kept, so closed buildings
   stay closed), written out as XML + PLY. The 300 m square around the origin holds
-  948 triangles, 350 polygons and 640 diffracting dihedra; the full scene (13,098
+  948 triangles, 350 polygons and 657 diffracting dihedra (653 before edges were cut at coplanar polygons' borders); the full scene (13,098
   triangles) is beyond the image tree's limit at reflection order 2.
 """
 
