@@ -78,9 +78,13 @@ class TraceOptions:
         the distance from the receiver to its last image, so a chain with
         ``|rx - I_k| > 10^(prune_db / 20) |rx - tx|`` carries at most ``-prune_db`` dB
         relative to free space (isotropic antennas; with directive antennas add their
-        peak gains). The dropped paths are counted in ``stats`` (``pruned_paths``); their
-        total power changes the power-sum path gain relative to free space by at most
-        ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB. ``None`` keeps every path.
+        peak gains). The dropped paths are counted in ``stats``
+        (``pruned_paths_upper_bound``); their total power is at most
+        ``pruned * 10^(-prune_db / 10)`` times the free-space power at the receiver's direct
+        distance, so the power-sum path gain changes by at most
+        ``10 log10(1 + pruned * 10^(-prune_db / 10))`` dB where it is at least free space's;
+        below free space (no line of sight) the bound is the linear one, and a receiver whose
+        only paths are pruned goes to no path. ``None`` keeps every path.
         Diffracted paths are pruned too when ``prune_frequency_hz`` is given, by the
         bound of :func:`wavepaths.search.diffraction._diffraction_amplitude_bound` (UTD with passive faces,
         :func:`wavepaths.em.utd.utd_magnitude_bound`; it holds for the ``"utd"`` model,
