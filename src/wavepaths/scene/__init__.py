@@ -2,7 +2,7 @@
 
 from .builtin import BUILTIN_SCENES
 from .loaders import load_scene
-from .mitsuba import write_mitsuba_xml
+from .mitsuba_writer import write_mitsuba_xml
 from .model import Scene, WavepathsWarning, build_scene, transformed
 from .tolerances import SceneTolerances
 

@@ -2,7 +2,7 @@
 
 Each scene is a few hand-placed polygons in metres, chosen so that its physics has a
 closed form or a clear expectation, and each can be written out as Mitsuba XML + PLY
-(:func:`wavepaths.scene.mitsuba.write_mitsuba_xml`) so that Sionna RT loads the very
+(:func:`wavepaths.scene.mitsuba_writer.write_mitsuba_xml`) so that Sionna RT loads the very
 same geometry.
 
 =================  ==========================================================================

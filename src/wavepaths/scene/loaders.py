@@ -73,7 +73,9 @@ def load_scene(
     ------
     SceneError
         A missing file, an unknown format, a mesh with no faces, non-finite
-        coordinates, a missing mesh or unknown material in an XML file.
+        coordinates; in an XML file also a missing mesh or included file, an unknown
+        material or element, a malformed number, an undefined ``$parameter``, an include
+        cycle, two shapes with the same name (see docs/scenes.md).
     """
     if source in BUILTIN_SCENES:
         arrays = builtin_arrays(source)
