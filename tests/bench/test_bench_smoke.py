@@ -92,13 +92,22 @@ def test_large_gain_differences_are_counted_by_reason_and_band():
                                     match("R", 3.0, 3), match("LOS", float("nan"), 4), match("D-R", 30.0, 5),
                                     match("D-R", 8.0, 6)])
     scene = load_scene("street_canyon")
+    # the wavepaths paths behind the matches: the D-R ones diffract on an edge of one object
+    kinds = {"D-R": [2, 1], "R": [1, 0], "R-R": [1, 1], "LOS": [0, 0]}
+    edge = next(d for d in range(len(scene.dihedra)) if scene.dihedra.diffracting[d])
+    paths = SimpleNamespace(interactions=np.array([kinds[m.kinds] for m in comp.matches], np.int8),
+                            primitive=np.array([[edge, 0] for _ in comp.matches], np.int64),
+                            depth=np.array([len(m.kinds.split("-")) if m.kinds != "LOS" else 0 for m in comp.matches]))
     # at depth 2 Sionna agrees on path 0 (0.3 dB) and path 5 (2 dB), not on path 6 (8 dB)
-    out = _large_gain_differences(scene, None, None, None, comp, depth2={0: 0.3, 5: -2.0, 6: 8.0})
+    out = _large_gain_differences(scene, paths, None, None, comp, depth2={0: 0.3, 5: -2.0, 6: 8.0})
     assert out["by_reason"] == {"sionna-dr-depends-on-max-depth": {"6-20 dB": 1, "> 20 dB": 1},
                                 "unexplained": {"6-20 dB": 2, "> 20 dB": 1}}
     assert [e["rx"] for e in out["unexplained_examples"]] == [1, 2, 6]
+    # a path Sionna's depth-2 run did not find stays unchecked, not unexplained
+    out = _large_gain_differences(scene, paths, None, None, comp, depth2={0: 0.3, 5: -2.0})
+    assert out["by_reason"]["sionna-dr-depends-on-max-depth-not-checked"] == {"6-20 dB": 1, "> 20 dB": 0}
     # without the depth-2 run the class label says it was not checked
-    out = _large_gain_differences(scene, None, None, None, comp)
+    out = _large_gain_differences(scene, paths, None, None, comp)
     assert out["by_reason"]["sionna-dr-depends-on-max-depth-not-checked"] == {"6-20 dB": 2, "> 20 dB": 1}
 
 

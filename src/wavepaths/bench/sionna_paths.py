@@ -188,9 +188,10 @@ def _large_gain_differences(scene, paths, a, sn, comp, max_depth: int = 3, depth
 
     ``depth2`` (wavepaths path index -> gain difference [dB] of its D-R against Sionna run at
     ``max_depth=2``) checks the D-R label path by path: a D-R pair is
-    ``sionna-dr-depends-on-max-depth`` only where Sionna's depth-2 coefficient of that same
-    path is within 6 dB of wavepaths' (else ``unexplained``). Without it the label is the
-    class's (``...-not-checked``).
+    ``sionna-dr-depends-on-max-depth`` where Sionna's depth-2 coefficient of that same path is
+    within 6 dB of wavepaths', ``unexplained`` where it is not, and
+    ``sionna-dr-depends-on-max-depth-not-checked`` where Sionna's depth-2 run did not find the
+    path (its ray sampling) or no depth-2 run was made.
     """
     from ..validation.report import (_matched_wedge_difference, _multi_object_dihedra, _non_manifold_dihedra,
                                      _sionna_collapsed_free_edge)
@@ -204,17 +205,17 @@ def _large_gain_differences(scene, paths, a, sn, comp, max_depth: int = 3, depth
             continue
         reason = "unexplained"
         if mm.kinds == "D-R" and max_depth >= 3:
-            if depth2 is None:
+            d2 = None if depth2 is None else depth2.get(mm.wp_index)
+            if d2 is not None and np.isfinite(d2) and abs(d2) <= GAIN_BANDS_DB[0]:
+                reason = "sionna-dr-depends-on-max-depth"
+            elif d2 is None or not np.isfinite(d2):
                 reason = "sionna-dr-depends-on-max-depth-not-checked"
-            else:
-                d2 = depth2.get(mm.wp_index)
-                if d2 is not None and np.isfinite(d2) and abs(d2) <= GAIN_BANDS_DB[0]:
-                    reason = "sionna-dr-depends-on-max-depth"
-        elif "D" in mm.kinds:
+        if reason != "sionna-dr-depends-on-max-depth" and "D" in mm.kinds:
+            # Sionna's wedge differs from the dihedron (a D-R too, when depth 2 does not explain it)
             wedge = _matched_wedge_difference(paths, mm.wp_index, multi, non_manifold)
             if wedge is not None:
                 reason = wedge
-            elif _sionna_collapsed_free_edge(scene, paths, mm, sn, a):
+            elif mm.kinds != "D-R" and _sionna_collapsed_free_edge(scene, paths, mm, sn, a):
                 reason = "sionna-free-edge-collapses-to-flat"
         band = "> 20 dB" if abs(diff) > GAIN_BANDS_DB[1] else "6-20 dB"
         counts.setdefault(reason, {"6-20 dB": 0, "> 20 dB": 0})[band] += 1
