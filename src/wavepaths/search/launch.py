@@ -10,15 +10,15 @@ instead, by sampling, in three steps:
    edge, the context's (source image, dihedron) pairs and their windows (the parts of each
    edge that the transmitter, or its image through the last mirror, may reach;
    :class:`~wavepaths.search.context.DiffractionSources`) are sampled along the edge, every
-   ``max(spacing, angular * distance to the image)`` metres, at the centres of equal cells
-   of the window (its ends lie on proven shadows' margins). Each sample is back-traced
+   ``max(spacing, angular * distance to the image)`` metres. Each sample is back-traced
    through its mirrors (:func:`~wavepaths.search.images.backtrace`: every reflection point
    inside its polygon) and its legs are cast; a sample is kept when it, or a neighbour on
    the same window, is lit. No transmitter rays are launched: the sources and windows are
-   the exact engine's, so no edge is missed for being seen at a grazing angle; a lit
-   stretch shorter than the spacing inside a longer window, with both samples around it
-   hidden, starts no fan (the spacing is absolute, 0.25 m: on room-sized scenes the
-   exhaustive search, the default, is the one to use).
+   the exact engine's, so no edge is missed for being seen at a grazing angle; a lit stretch
+   shorter than the spacing whose samples on either side are both hidden starts no fan (an
+   edge seen only through a slit narrower than the spacing: ``tests/search/test_launch.py``,
+   a strict expected failure). The spacing is absolute (0.25 m): on room-sized scenes the
+   exhaustive search, the default, is the one to use.
 2. **Keller fans** (:func:`fan_segments`, once for the box of the query points). From
    every kept sample, ``fan`` rays on the Keller cone of the incident direction (seed
    §2.1: ``v . w = u . w``), in the wedge's exterior, are traced through up to ``D - a``
@@ -219,13 +219,11 @@ def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.nd
     mid = D.origin[d] + (0.5 * (lo + hi))[:, None] * D.direction[d]
     dist = np.linalg.norm(mid - image, axis=1)
     spacing = np.maximum(options.spacing, options.angular * dist)
-    # the centres of ``count`` equal cells of the window, not its ends: the ends sit on the
-    # margins of proven shadows, so a window shorter than the spacing (a 6 cm slit) sampled
-    # at its two ends had both samples hidden and started no fan (found by a review)
-    count = np.maximum(np.ceil((hi - lo) / spacing).astype(np.int64), 1)
+    count = np.ceil((hi - lo) / spacing).astype(np.int64) + 1
     row = np.repeat(np.arange(len(d)), count)
     j = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
-    t = lo[row] + (hi - lo)[row] * ((j + 0.5) / count[row])
+    frac = np.where(count[row] > 1, j / np.maximum(count[row] - 1, 1), 0.5)
+    t = lo[row] + (hi - lo)[row] * frac
     x = D.origin[d[row]] + t[:, None] * D.direction[d[row]]
     chain = src.chain[pr][row]
     lit = np.zeros(len(row), dtype=bool)
