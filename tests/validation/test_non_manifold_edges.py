@@ -24,7 +24,7 @@ from wavepaths.scene.builtin import SceneBuilder
 from wavepaths.search import TraceOptions, trace
 from wavepaths.validation.compare import compare_paths
 from wavepaths.validation.known import KNOWN_DISAGREEMENTS
-from wavepaths.validation.report import (
+from wavepaths.validation.disagreements import (
     MATCHED_NON_MANIFOLD_EDGE,
     _matched_wedge_difference,
     _multi_object_dihedra,

@@ -255,7 +255,7 @@ def test_a_path_whose_leg_crosses_a_face_exactly_at_its_edge_is_a_convention_not
     import numpy as np
 
     from wavepaths import load_scene
-    from wavepaths.validation.report import _crosses_faces_only_at_edges
+    from wavepaths.validation.disagreements import _crosses_faces_only_at_edges
 
     s = load_scene("slit_shutter")
     tx, rx = np.array([0.3, -6.0, 2.8]), np.array([-1.0, 2.5, 1.4])

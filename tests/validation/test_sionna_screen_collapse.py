@@ -24,7 +24,7 @@ from wavepaths.scene.builtin import SceneBuilder
 from wavepaths.search import TraceOptions, trace
 from wavepaths.validation.compare import compare_paths
 from wavepaths.validation.known import KNOWN_DISAGREEMENTS
-from wavepaths.validation.report import _sionna_collapsed_free_edge
+from wavepaths.validation.disagreements import _sionna_collapsed_free_edge
 
 pytestmark = pytest.mark.sionna
 

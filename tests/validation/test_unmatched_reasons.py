@@ -11,8 +11,8 @@ from wavepaths import TraceOptions, load_scene, trace
 from wavepaths.fields import FieldConfig, compute_fields
 from wavepaths.search.geometry import diffraction_point_parameter
 from wavepaths.validation.compare import SIONNA_DUPLICATE, compare_paths
-from wavepaths.validation.report import (SIONNA_ONLY_FAILURE, SIONNA_ONLY_NOT_A_WEDGE, SIONNA_ONLY_OWN_FACE,
-                                         _explain_sionna_only)
+from wavepaths.validation.disagreements import (SIONNA_ONLY_FAILURE, SIONNA_ONLY_NOT_A_WEDGE, SIONNA_ONLY_OWN_FACE,
+                                                _explain_sionna_only)
 from wavepaths.validation.sionna_runner import SionnaPaths
 
 

@@ -81,7 +81,7 @@ def test_the_exact_solutions_decide_who_matches(quick_report):
 
 
 def test_every_sionna_path_is_found_by_wavepaths(quick_report):
-    from wavepaths.validation.report import SIONNA_ONLY_FAILURE
+    from wavepaths.validation.disagreements import SIONNA_ONLY_FAILURE
 
     _, summary = quick_report
     for c in summary["cases"]:

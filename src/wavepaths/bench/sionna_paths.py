@@ -136,7 +136,7 @@ def _agreement(xml: str, paths, a, sn, sn_depth2=None) -> dict:
     (:func:`_large_gain_differences`)."""
     from ..scene import load_scene
     from ..validation.compare import compare_paths
-    from ..validation.report import SIONNA_ONLY_FAILURE, _explain_sionna_only
+    from ..validation.disagreements import SIONNA_ONLY_FAILURE, _explain_sionna_only
 
     from ..topology.sectors import sector_table
 
@@ -193,8 +193,8 @@ def _large_gain_differences(scene, paths, a, sn, comp, max_depth: int = 3, depth
     ``sionna-dr-depends-on-max-depth-not-checked`` where Sionna's depth-2 run did not find the
     path (its ray sampling) or no depth-2 run was made.
     """
-    from ..validation.report import (_matched_wedge_difference, _multi_object_dihedra, _non_manifold_dihedra,
-                                     _sionna_collapsed_free_edge)
+    from ..validation.disagreements import (_matched_wedge_difference, _multi_object_dihedra, _non_manifold_dihedra,
+                                            _sionna_collapsed_free_edge)
 
     multi, non_manifold = _multi_object_dihedra(scene), _non_manifold_dihedra(scene)
     counts: dict = {}

@@ -62,29 +62,17 @@ def chain_clusters(points: np.ndarray, tolerance: float) -> np.ndarray:
     earlier cluster whose first point lies within ``tolerance``, else starts one. Unlike
     transitive merging, no cluster spreads beyond ``tolerance`` from its first point."""
     out = np.empty(len(points), dtype=np.int64)
-    cells: dict = {}
+    cells: dict = {}  # grid cell of side ``tolerance`` -> the clusters whose first point lies in it
     firsts: list = []
-    inv = 1.0 / tolerance
-    for i, p in enumerate(points):
-        key = tuple(np.floor(p * inv).astype(np.int64).tolist())
-        found = -1
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dz in (-1, 0, 1):
-                    for c in cells.get((key[0] + dx, key[1] + dy, key[2] + dz), ()):
-                        if np.linalg.norm(points[firsts[c]] - p) <= tolerance:
-                            found = c
-                            break
-                    if found >= 0:
-                        break
-                if found >= 0:
-                    break
-            if found >= 0:
-                break
+    keys = np.floor(points / tolerance).astype(np.int64).tolist()
+    near = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)]
+    for i, (x, y, z) in enumerate(keys):
+        candidates = (c for dx, dy, dz in near for c in cells.get((x + dx, y + dy, z + dz), ()))
+        found = next((c for c in candidates if np.linalg.norm(points[firsts[c]] - points[i]) <= tolerance), -1)
         if found < 0:
             found = len(firsts)
             firsts.append(i)
-            cells.setdefault(key, []).append(found)
+            cells.setdefault((x, y, z), []).append(found)
         out[i] = found
     return out
 
