@@ -188,3 +188,18 @@ def test_a_slab_of_thickness_zero_reflects_nothing_at_every_angle(c):
     r = reflection_coefficients(Material("thin", "custom", a=5.0, c=0.05, thickness_m=0.0), 3e9, c, "slab")
     assert r.r_te == 0 and r.r_tm == 0
     assert _compiled_fresnel(5.0 - 0.5j, c, 0.0, True) == (0j, 0j)
+
+
+@pytest.mark.parametrize("log_eta", [99.0, 101.0, 155.0, 165.0, 307.0])
+def test_a_huge_permittivity_gives_a_perfect_conductor_not_nan(log_eta):
+    """|eta| past ~1e154 overflowed the squares of the rationalised eq. (37) (r_tm was NaN).
+    To first order r_te = -1 + 2c/sqrt(eta) and r_tm = 1 - 2/(c sqrt(eta)): within 2e-16 of
+    (-1, +1) at |eta| >= 1e98 for cos(theta) >= 1e-33, on both sides of the 1e100 switch, for
+    a lossy and a lossless eta, half-space and slab (whose transmission then vanishes or is
+    below rounding)."""
+    c = np.array([1.0, 0.5, 1e-3, 1e-20])
+    for eta in (10.0**log_eta * (1 - 1j) / np.sqrt(2), 10.0**log_eta + 0j):
+        tol = 2.0 / (c * np.sqrt(abs(eta))) + 1e-15
+        for co in (fresnel_half_space(eta, c), slab_coefficients(eta, c, 0.2, LAMBDA35)):
+            assert np.all(np.isfinite(co.r_te)) and np.all(np.isfinite(co.r_tm))
+            assert np.all(np.abs(co.r_te + 1) <= tol) and np.all(np.abs(co.r_tm - 1) <= tol)

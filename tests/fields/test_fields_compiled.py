@@ -253,3 +253,22 @@ def test_paths_next_to_a_shadow_boundary_go_to_the_numpy_chain_with_their_pair(m
     np.testing.assert_array_equal(s1, s0)
     ref = compute_fields(scene, paths, FieldConfig(F, compiled=False)).a
     assert np.all(_close(a, ref, 1e-11))
+
+
+@pytest.mark.parametrize("sigma", [1e155, 1e300])
+def test_a_huge_conductivity_is_a_perfect_conductor_in_both_chains(canyon_paths, sigma):
+    """sigma = 1e155 S/m made |eta| ~ 1e165: the rationalised Fresnel form's squares overflowed
+    and r_tm was NaN in both chains. Above |eta| = 1e100 the coefficients are a perfect
+    conductor's (within 2 / (cos(theta) sqrt|eta|) < 1e-16 of the formula); the field of
+    every path equals the PEC scene's to rounding, numpy and compiled alike."""
+    import dataclasses
+
+    scene, paths = canyon_paths
+    metal = Material("huge", "custom", a=1.0, c=sigma, thickness_m=0.2)
+    huge = dataclasses.replace(scene, materials=tuple(metal for _ in scene.materials))
+    pec = dataclasses.replace(scene, materials=tuple(PEC for _ in scene.materials))
+    for flag in (False, True):  # (the two chains agree to 1e-11, test_compiled_chain_equals_the_numpy_chain)
+        ref = compute_fields(pec, paths, FieldConfig(F, compiled=flag)).a
+        got = compute_fields(huge, paths, FieldConfig(F, compiled=flag)).a
+        assert np.all(np.isfinite(got))
+        assert np.all(_close(got, ref, 1e-14))

@@ -49,6 +49,10 @@ _MODELS: tuple[str, ...] = ("slab", "half_space")
 _COS_ROUNDING = 1e-9
 # Below this a slab denominator is treated as 0 (exact grazing incidence).
 _TINY = 1e-200
+# Above this |eta| the coefficients are a perfect conductor's: r_te = -1 + 2c/sqrt(eta) and
+# r_tm = 1 - 2/(c sqrt(eta)) to first order, within 1e-16 of (-1, +1) for cos(theta) >= 1e-34,
+# and a slab transmits e^{-jq} ~ 0. Past |eta| ~ 1e154 the rationalised form's squares overflow.
+_HUGE = 1e100
 
 
 class FresnelCoefficients(NamedTuple):
@@ -118,7 +122,12 @@ def _half_space_parts(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> _H
     With ``root^2 = eta - 1 + c^2``: ``r_te = (1 - eta)/(c + root)^2``,
     ``r_tm = (eta - 1)((eta + 1)c^2 - 1)/(eta c + root)^2``,
     ``1 - r_te^2 = 4 c root/(c + root)^2`` and ``1 - r_tm^2 = 4 eta c root/(eta c + root)^2``.
+    Above ``|eta| = 1e100`` (a conductivity of about 2e88 S/m at 3.5 GHz) the coefficients
+    are a perfect conductor's, ``(-1, +1)`` with ``1 - r^2 = 0``: within 1e-16 of the formula
+    for ``cos theta >= 1e-34``, where the formula's squares would overflow from ``|eta| ~ 1e154``.
     """
+    huge = np.abs(eta) > _HUGE  # a perfect conductor to rounding (see _HUGE)
+    eta = np.where(huge, 2.0, eta)  # a stand-in that keeps the squares below finite
     root = _root(eta, c)
     den_te = (c + root) ** 2
     den_tm = (eta * c + root) ** 2
@@ -130,6 +139,9 @@ def _half_space_parts(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> _H
     r_tm = np.where(same, 0.0, (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) / d_tm)
     om_te = np.where(same, 1.0, 4.0 * c * root / d_te)
     om_tm = np.where(same, 1.0, 4.0 * eta * c * root / d_tm)
+    if np.any(huge):
+        r_te, r_tm = np.where(huge, -1.0 + 0j, r_te), np.where(huge, 1.0 + 0j, r_tm)
+        om_te, om_tm = np.where(huge, 0j, om_te), np.where(huge, 0j, om_tm)
     return _HalfSpaceParts(r_te, r_tm, om_te, om_tm)
 
 

@@ -20,6 +20,7 @@ KIND_PEC = 1
 KIND_ABSORBER = 2
 
 _TINY = 1e-200  # wavepaths.em.fresnel._TINY
+_HUGE = 1e100  # wavepaths.em.fresnel._HUGE: a perfect conductor above this |eta|
 _E_PI4 = complex(math.cos(0.25 * math.pi), math.sin(0.25 * math.pi))
 _E_MPI4 = complex(math.cos(0.25 * math.pi), -math.sin(0.25 * math.pi))
 _SQRT_PI = math.sqrt(math.pi)
@@ -168,6 +169,9 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
     if kind == KIND_ABSORBER:
         return 0j, 0j
     c = min(abs(c), 1.0)
+    huge = abs(eta) > _HUGE  # a perfect conductor to rounding (wavepaths.em.fresnel._HUGE)
+    if huge:
+        eta = 2.0 + 0j  # a stand-in that keeps the squares below finite; overridden after them
     # _half_space_parts, with root = sqrt((eta - 1) + c^2), den = (c + root)^2, (eta c + root)^2
     w = (eta - 1.0) + c * c
     # the branch with Im <= 0 (wavepaths.em.fresnel._root): a zero imaginary part taken as -0
@@ -186,6 +190,8 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
         r_tm = (eta - 1.0) * ((eta + 1.0) * c * c - 1.0) * i_tm
         om_te = 4.0 * c * root * i_te
         om_tm = 4.0 * eta * c * root * i_tm
+    if huge:  # the slab's R is then r whatever its phase (1 - r^2 = 0): the stand-in's q is harmless
+        r_te, r_tm, om_te, om_tm = -1.0 + 0j, 1.0 + 0j, 0j, 0j
     if not slab:
         return r_te, r_tm
     if thickness_over_lambda == 0.0:
