@@ -83,6 +83,92 @@ def test_tolerance_drop_kernel_matches_the_numpy_reference():
         np.testing.assert_array_equal(drop, [False, True, True, True])
 
 
+def _both_drops(pair, bound, go, eps):
+    """The compiled kernel's drops and the numpy reference's, the same to the candidate."""
+    from wavepaths.search import _numba_tolerance as _numba
+
+    got = _numba.tolerance_drop(pair, bound, go, eps, len(go))
+    ref = _tolerance_drop_numpy(pair, bound, go, eps)
+    np.testing.assert_array_equal(got, ref)
+    return got
+
+
+def test_each_cell_has_its_own_running_sum_170_db_below_another_cell():
+    """A tile whose cell 0 is strong and cell 1 170 dB weaker: cell 1's candidates are each
+    43 times its limit and must be kept. A running sum shared by the tile's cells (less its
+    value at the cell's start) lost them in the strong cell's sum (1 + 1e-17 == 1) and dropped
+    both (4.8 dB of cell 1's power, against a tolerance of 0.1 dB); a bound under its cell's
+    limit, 142 dB below the other cell, came out at a rounding step of the shared sum
+    (2.2e-16 > 1.5e-16) and was kept."""
+    eps = 10 ** 0.01 - 1
+    pair = np.array([0, 1, 1], np.int64)
+    drop = _both_drops(pair, np.array([1.0, 1e-17, 1e-17]), np.array([1.0, 1e-17]), eps)
+    np.testing.assert_array_equal(drop, [False, False, False])
+    # the strong cell after the weak one, and a weak cell whose candidates fit its limit
+    drop = _both_drops(np.array([1, 0, 0], np.int64), np.array([1.0, 1e-17, 1e-17]), np.array([1e-17, 1.0]), eps)
+    np.testing.assert_array_equal(drop, [False, False, False])
+    drop = _both_drops(pair, np.array([1.0, 1e-20, 2e-20]), np.array([1.0, 1e-17]), eps)
+    np.testing.assert_array_equal(drop, [False, True, True])
+    # under-drop: 1.2e-16 <= eps * go[1] = 1.5e-16, one cell at 1.0 before it
+    drop = _both_drops(np.array([0, 1], np.int64), np.array([1.0, 1.2e-16]), np.array([1.0, 1.5e-16 / eps]), eps)
+    np.testing.assert_array_equal(drop, [False, True])
+
+
+def test_each_cells_dropped_bounds_stay_within_the_tolerance_of_its_power():
+    """The stated bound, cell by cell, on tiles whose cells spread over 200 dB in random order:
+    the dropped bounds of a (transmitter, cell) sum (exactly, math.fsum) to at most
+    ``eps * go_power`` (the power of its line-of-sight and reflected paths, at most its kept
+    total: the total then changes by at most the tolerance), up to the rounding of a sum of
+    n terms; they are its weakest; and the drops stop only where the next finite bound would
+    exceed the limit. Compiled and numpy the same."""
+    import math
+
+    rng = np.random.default_rng(23)
+    for trial in range(30):
+        n_pairs, k = int(rng.integers(2, 300)), int(rng.integers(2, 3000))
+        go = 10.0 ** rng.uniform(-20, 0, n_pairs)
+        go[rng.random(n_pairs) < 0.05] = 0.0
+        pair = rng.integers(0, n_pairs, k).astype(np.int64)
+        eps = float(rng.choice([10 ** 0.001 - 1, 10 ** 0.01 - 1, 10 ** 0.1 - 1, 1.0]))
+        bound = eps * go[pair] * 10.0 ** rng.uniform(-4, 0.5, k) / 10
+        bound[rng.random(k) < 0.02] = 0.0
+        bound[rng.random(k) < 0.03] = np.inf
+        tie = rng.random(k) < 0.1
+        bound[tie] = eps * go[pair[tie]] / 30  # ties within a cell
+        drop = _both_drops(pair, bound, go, eps)
+        assert drop.any() and (~drop).any()
+        for c in range(n_pairs):
+            mine = pair == c
+            dropped, kept = bound[mine & drop], bound[mine & ~drop]
+            limit = eps * go[c]
+            slack = 1 + 4 * (len(dropped) + 1) * 2.0 ** -53
+            assert np.isfinite(dropped).all()
+            total = math.fsum(dropped)
+            assert total <= limit * slack, (trial, c, total, limit)
+            finite = kept[np.isfinite(kept)]
+            if len(finite):
+                assert not len(dropped) or dropped.max() <= finite.min()
+                assert total + finite.min() > limit / slack, (trial, c, total, finite.min(), limit)
+
+
+def test_tolerance_drop_kernel_matches_the_numpy_reference_over_a_wide_spread():
+    """Bit for bit where the sums span 600 decades: bounds from 1e-300 to 1e300, zeros,
+    infinite bounds, cells without power, and one cell holding most candidates."""
+    rng = np.random.default_rng(7)
+    for trial in range(10):
+        n_pairs, k = int(rng.integers(1, 500)), int(rng.integers(1, 5000))
+        pair = np.where(rng.random(k) < 0.5, 0, rng.integers(0, n_pairs, k)).astype(np.int64)
+        go = 10.0 ** rng.uniform(-300, 300, n_pairs)
+        go[rng.random(n_pairs) < 0.1] = 0.0
+        bound = go[pair] * 10.0 ** rng.uniform(-6, 1, k)
+        bound[rng.random(k) < 0.02] = 0.0
+        bound[rng.random(k) < 0.03] = np.inf
+        for eps in (10 ** 0.01 - 1, 10 ** 0.1 - 1, 1.0):
+            _both_drops(pair, bound, go, eps)
+    for k in (0, 1):  # no candidates, one
+        _both_drops(np.zeros(k, np.int64), np.ones(k), np.ones(3), 0.5)
+
+
 def test_a_tolerance_map_is_the_same_with_and_without_the_compiled_kernels():
     """TraceOptions(compiled=False) runs every numpy reference (the bounds, the drops, the
     search): the same paths per cell and the same sums within 1e-12."""

@@ -270,19 +270,29 @@ def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power
 def _tolerance_drop_numpy(pair: np.ndarray, bound: np.ndarray, go_power: np.ndarray, eps: float) -> np.ndarray:
     """(k,) bool: the candidates :func:`_tolerance_keep` drops, from their (transmitter, cell)
     pairs ``pair``, power bounds ``bound`` and the pairs' geometrical-optics powers
-    ``go_power`` (the reference of ``wavepaths.search._numba.tolerance_drop``).
+    ``go_power`` (the reference of ``wavepaths.search._numba_tolerance.tolerance_drop``).
 
-    The candidates in order of pair, then bound (weakest first; ties in their order); one
-    running sum over that order, an infinite bound counted as 0 and never dropped (it ends
-    its pair's drops: it sorts last); a candidate is dropped while the sum since its pair's
-    first candidate stays at most ``eps * go_power[pair]``.
+    Per pair, its candidates by bound (weakest first; ties in their order) and a running sum
+    of its own, started at 0, an infinite bound counted as 0 and never dropped (it sorts
+    last); a candidate is dropped while its pair's sum stays at most ``eps * go_power[pair]``.
+    The sums are added rank by rank (the pairs' first candidates, then their second, ...),
+    so each pair's sum is added in the kernel's order, from 0, and never differenced out of
+    a sum over other pairs (which loses a bound below ~1e-16 of those pairs' total).
     """
     order = np.lexsort((bound, pair))
     sp, sb = pair[order], bound[order]
     finite = np.isfinite(sb)
-    cum = np.cumsum(np.where(finite, sb, 0.0))
+    val = np.where(finite, sb, 0.0)
     first = np.searchsorted(sp, sp, side="left")
-    within = cum - np.concatenate([[0.0], cum])[first]  # running sum within each pair
+    rank = np.arange(len(sp)) - first  # position within its pair
+    by_rank = np.argsort(rank, kind="stable")
+    edges = np.searchsorted(rank[by_rank], np.arange(rank.max(initial=-1) + 2))
+    cum = np.zeros(len(go_power))  # each pair's running sum
+    within = np.empty(len(sp))
+    for r in range(len(edges) - 1):  # one pass per rank (at most one candidate of a pair each)
+        at = by_rank[edges[r]:edges[r + 1]]
+        cum[sp[at]] += val[at]
+        within[at] = cum[sp[at]]
     drop = np.zeros(len(pair), dtype=bool)
     drop[order] = finite & (within <= eps * go_power[sp])
     return drop

@@ -57,15 +57,17 @@ def amplitude_bounds(phi, phi_prime, n, te, de, tr, dr, t, k, floor, utd_floor):
 
 @numba.njit(cache=True, nogil=True)
 def tolerance_drop(pair, bound, go_power, eps, n_pairs):
-    # coverage.solver._tolerance_drop_numpy (the reference): the candidates ordered by pair,
-    # then bound (ties in their order), as np.lexsort((bound, pair)); the same running sum
-    # over that order as its np.cumsum (infinite bounds counted as 0, never dropped), each
-    # candidate dropped while the sum since its pair's first stays <= eps * go_power[pair].
+    # coverage.solver._tolerance_drop_numpy (the reference): per (transmitter, cell) pair,
+    # its candidates by bound (ties in their order), as np.lexsort((bound, pair)); one
+    # running sum per pair, started at 0 and added in that order as the reference's
+    # (infinite bounds counted as 0, never dropped), each candidate dropped while its pair's
+    # sum stays <= eps * go_power[pair]. The sum is the pair's own: a sum carried over the
+    # pairs, less its value at the pair's start, lost bounds below ~1e-16 of the earlier
+    # pairs' total (dropped whatever their size against their own cell's power).
     # The pairs are grouped by a counting sort. Returns (k,) bool, True: dropped
     k = pair.shape[0]
     start, members = _counting_sort(pair, n_pairs)
     drop = np.zeros(k, np.bool_)
-    cum = 0.0
     for p in range(n_pairs):
         lo, hi = start[p], start[p + 1]
         if hi == lo:
@@ -76,10 +78,10 @@ def tolerance_drop(pair, bound, go_power, eps, n_pairs):
             b[j] = bound[idx[j]]
         order = np.argsort(b, kind="mergesort")
         limit = eps * go_power[p]
-        base = cum
+        cum = 0.0  # this pair's own sum
         for j in range(hi - lo):
             v = b[order[j]]
             finite = math.isfinite(v)
             cum += v if finite else 0.0
-            drop[idx[order[j]]] = finite and cum - base <= limit
+            drop[idx[order[j]]] = finite and cum <= limit
     return drop
