@@ -410,3 +410,45 @@ def test_a_truncated_map_file_is_a_clear_error(tmp_path):
     with pytest.raises(WavepathsError, match="cannot read a coverage map"):
         CoverageMap.load(str(tmp_path / "t.npz"))
     assert CoverageMap.load(path).num_cells == cmap.num_cells
+
+
+def _points_on_wall_faces(scene) -> tuple[np.ndarray, np.ndarray]:
+    """One point on each vertical polygon of ``scene`` (its corners' mean, lifted to 2 m and
+    projected back onto the plane), with that polygon's index."""
+    from wavepaths.search.trace import points_on_faces
+
+    n = scene.polygon_normal
+    walls = np.nonzero(np.abs(n[:, 2]) < 1e-9)[0]
+    pts = []
+    for q in walls:
+        corners = scene.vertices[scene.triangles[scene.triangle_polygon == q]].reshape(-1, 3)
+        c = corners.mean(axis=0)
+        c[2] = min(max(c[2], 2.0), corners[:, 2].max() - 0.5)
+        pts.append(c - (c @ n[q] - scene.polygon_offset[q]) * n[q])
+    pts = np.array(pts)
+    assert (points_on_faces(scene, pts) == walls).all()  # each point is on its wall, within the tolerance
+    return pts, walls
+
+
+def test_a_transmitter_on_a_wall_face_is_treated_alike_on_every_face(canyon):
+    """A transmitter exactly on a wall face is on no side of it: trace() and coverage() warn
+    that it lies on a face, on every face. The ray-parity inside test answers either way on
+    a surface; it had a coverage map refuse a transmitter on 8 of the 24 walls as "inside a
+    solid object" and accept it on the other 16, and trace() warn "inside" on those 8."""
+    from wavepaths.scene.model import WavepathsWarning
+
+    pts, walls = _points_on_wall_faces(canyon)
+    assert len(walls) >= 20
+    inside = inside_solid_objects(canyon, pts, solid_objects(canyon))
+    assert inside.any() and not inside.all()  # the parity rule does split the faces
+    grid = PlanarGrid(center=[-37.3, 2.2], size=[14, 10], cell_size=[7, 5], height=1.5)
+    rx = grid.cell_centers().reshape(-1, 3)
+    for p in pts:
+        opts = TraceOptions(max_reflections=1, diffraction=False)
+        with pytest.warns(WavepathsWarning, match="lie exactly on a face") as rec:
+            paths = trace(canyon, p[None], rx, opts)
+        assert not [w for w in rec if "inside closed" in str(w.message)]
+        with pytest.warns(WavepathsWarning, match="lie exactly on a face"):
+            cmap = coverage(canyon, p, grid, opts, settings=IN_PROCESS)
+        count = cmap.path_count(0).reshape(-1)
+        assert (count == np.bincount(paths.rx_index, minlength=len(rx))).all()

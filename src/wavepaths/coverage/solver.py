@@ -42,7 +42,7 @@ from ..search import kernels
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
-from ..search.trace import check_positions
+from ..search.trace import _warn_on_faces, check_positions, points_on_faces
 from .grid import Grid, MeshGrid, PlanarGrid
 from .inside import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap
@@ -424,7 +424,8 @@ def coverage(
     Raises
     ------
     WavepathsError
-        A transmitter that is NaN, inside a solid object or at a cell centre; a grid
+        A transmitter that is NaN, inside a solid object (one exactly on a face is warned
+        about instead, as :func:`~wavepaths.search.trace.trace` does) or at a cell centre; a grid
         whose result would not fit ``settings.max_memory_bytes``; a material without
         values at the frequency; options of the wrong type.
     """
@@ -464,6 +465,7 @@ def coverage(
         inside = _cached(scene, "inside:" + hashlib.sha1(flat.tobytes()).hexdigest(),
                          lambda: inside_solid_objects(scene, flat, solids))
         tx_in = inside_solid_objects(scene, tx, solids)
+        tx_in &= points_on_faces(scene, tx) < 0  # on a face the parity rule answers either way: warned below
         if tx_in.any():
             i = int(np.nonzero(tx_in)[0][0])
             raise WavepathsError(
@@ -474,6 +476,7 @@ def coverage(
         inside = np.zeros(len(flat), bool)
     timings["inside_s"] = time.perf_counter() - t
     active = np.nonzero(~inside)[0]
+    _warn_on_faces(scene, tx, np.empty((0, 3)))  # as trace() does: such a transmitter is on no side of its face
     _check_off_transmitters(scene, tx, flat, active, grid)
 
     t = time.perf_counter()
