@@ -42,7 +42,7 @@ def test_erfcx_is_scipys():
 
 
 def test_compiled_transition_series_is_the_references_polynomial():
-    from wavepaths.em.utd import _f_series, transition_function
+    from wavepaths.em.utd_terms import _f_series, transition_function
     from wavepaths.fields import _numba
 
     x = np.concatenate([[100.0, 1e8, 1e300, np.inf], np.geomspace(100.0, 1e12, 1000)])

@@ -12,7 +12,8 @@ from numpy.typing import ArrayLike
 
 from wavepaths.em.fresnel import reflection_coefficients
 from wavepaths.em.materials import Material
-from wavepaths.em.utd import Array, CArray, FaceCoefficients, _check_floor, _check_r, _four_terms, _prepare
+from wavepaths.em.utd_terms import Array, CArray, _check_floor, _check_r, _four_terms, _prepare
+from wavepaths.em.wedge_faces import FaceCoefficients
 from wavepaths.errors import WavepathsError
 
 __all__ = ["sionna_compat_coefficients", "sionna_face_coefficients"]

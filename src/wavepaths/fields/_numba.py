@@ -24,7 +24,7 @@ _HUGE = 1e100  # wavepaths.em.fresnel._HUGE: a perfect conductor above this |eta
 _E_PI4 = complex(math.cos(0.25 * math.pi), math.sin(0.25 * math.pi))
 _E_MPI4 = complex(math.cos(0.25 * math.pi), -math.sin(0.25 * math.pi))
 _SQRT_PI = math.sqrt(math.pi)
-F_SERIES_X = 100.0  # wavepaths.em.utd._F_SERIES_X
+F_SERIES_X = 100.0  # wavepaths.em.utd_terms._F_SERIES_X
 
 
 @intrinsic
@@ -67,7 +67,7 @@ def erfcx_array(addr, z):
 
 @numba.njit(cache=True, nogil=True)
 def _g(addr, x):
-    # wavepaths.em.utd._g: G(x) = F(x)/sqrt(x), from x = 100 on by F's asymptotic series
+    # wavepaths.em.utd_terms._g: G(x) = F(x)/sqrt(x), from x = 100 on by F's asymptotic series
     if x >= F_SERIES_X:
         return f_series(x) / math.sqrt(x)
     return _E_PI4 * _SQRT_PI * erfcx(addr, _E_PI4 * math.sqrt(x))
@@ -75,7 +75,7 @@ def _g(addr, x):
 
 @numba.njit(cache=True, nogil=True)
 def f_series(x):
-    """F(x) for x >= 100 by its asymptotic series: :func:`wavepaths.em.utd._f_series`, the
+    """F(x) for x >= 100 by its asymptotic series: :func:`wavepaths.em.utd_terms._f_series`, the
     same polynomial."""
     u = 0.5 / x
     v = u * u
@@ -86,7 +86,7 @@ def f_series(x):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _cot_f(addr, eps, n, kl, root_2kl):
-    # wavepaths.em.utd._cot_f: cot(eps/2n) F(2 kL sin^2(eps/2)), 0 at eps = 0. With h = eps/2,
+    # wavepaths.em.utd_terms._cot_f: cot(eps/2n) F(2 kL sin^2(eps/2)), 0 at eps = 0. With h = eps/2,
     # g = h/n and F(x) = sqrt(x) G(x), sqrt(x) = sqrt(2kL) |sin h|: the term is
     # sign(eps) sqrt(2kL) cos g (sin h / sin g) G(x), where sin h / sin g > 0 (|h| <= pi) is
     # the reference's n sinc(eps/2pi) / sinc(eps/2pi n), and n where sin g underflows
@@ -120,7 +120,7 @@ def luebbers_terms(addr, phi, phi_prime, beta_0, n, k, L, floor):
     bp = phi + phi_prime
     kl = k * L
     root_2kl = math.sqrt(2.0 * kl)
-    # wavepaths.em.utd._epsilons (np.round is round-half-even, as np.rint)
+    # wavepaths.em.utd_terms._epsilons (np.round is round-half-even, as np.rint)
     t1 = _cot_f(addr, (math.pi + bm) - two_pi_n * np.rint((bm + math.pi) / two_pi_n), n, kl, root_2kl)
     t2 = _cot_f(addr, (math.pi - bm) + two_pi_n * np.rint((bm - math.pi) / two_pi_n), n, kl, root_2kl)
     t3 = _cot_f(addr, (math.pi + bp) - two_pi_n * np.rint((bp + math.pi) / two_pi_n), n, kl, root_2kl)
@@ -238,7 +238,7 @@ def _perp_unit(a0, a1, a2, b0, b1, b2, f0, f1, f2):
 @numba.njit(cache=True, nogil=True, inline="always")
 def _edge_reflection(r_te, r_tm, ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, bi0, bi1, bi2, fi0, fi1, fi2, bo0, bo1, bo2,
                      fo0, fo1, fo2):
-    # wavepaths.em.utd.edge_fixed_reflection at one point, with the edge-fixed bases (b0', phi')
+    # wavepaths.em.wedge_faces.edge_fixed_reflection at one point, with the edge-fixed bases (b0', phi')
     # of k_in and (b0, phi) of k_out given: G = -B_out^T R B_in, its four entries (rows b0, phi;
     # columns b0', phi'), the same expressions. The TE direction s = unit(k_in x n), or where
     # k_in runs along n, the reflection kernel's fallback unit(n x z) (or x)
@@ -305,7 +305,7 @@ def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y
     fallback ``f`` (the 0-face direction), ``y`` the n-face direction (a 3-tuple), the UTD
     angles, ``L``, the faces' materials. The Jones matrix is
     :func:`wavepaths.em.utd.diffraction_jones_matrices`' with the faces' reflections of
-    :func:`wavepaths.em.utd.wedge_reflection_matrices` (:func:`_edge_reflection`)."""
+    :func:`wavepaths.em.wedge_faces.wedge_reflection_matrices` (:func:`_edge_reflection`)."""
     sb = abs(math.sin(b0))
     r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime)))
     rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi)))
@@ -352,7 +352,7 @@ def diffract(addr, E, e, s_in, s_out, x_fallback, y_face, phi, phi_prime, beta_0
              kinds, etas, thick, slab):
     """:func:`wavepaths.fields.chain._apply_diffraction` after the wedge geometry, model
     ``"utd"`` (Luebbers' face coefficients at their angles,
-    :func:`wavepaths.em.utd.luebbers_face_coefficients`, as the faces' reflections in the
+    :func:`wavepaths.em.wedge_faces.luebbers_face_coefficients`, as the faces' reflections in the
     edge-fixed bases), in place on ``E`` (k, P, 3); ``x_fallback`` and ``y_face`` (k, 3) the
     0-face and n-face directions.
     """

@@ -291,7 +291,7 @@ def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, 
 
 def _diffract_compiled(scene: "Scene", cfg: FieldConfig, E, g: dict, L, mat0, matn) -> np.ndarray:
     """The tail of :func:`_apply_diffraction` (model ``"utd"``) in :func:`wavepaths.fields._numba.diffract`."""
-    from ..em.utd import _prepare
+    from ..em.utd_terms import _prepare
     from . import _numba
 
     # the reference's input checks (finite angles, 1 < n <= 2, L >= 0), with its messages

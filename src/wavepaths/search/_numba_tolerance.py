@@ -41,7 +41,7 @@ def amplitude_bounds(phi, phi_prime, n, te, de, tr, dr, t, k, floor, utd_floor):
         total = 0.0
         for e in range(4):
             b = bm if e < 2 else bp
-            if e % 2 == 0:  # em.utd._epsilons: eps_plus, eps_minus (np.round: half to even)
+            if e % 2 == 0:  # em.utd_terms._epsilons: eps_plus, eps_minus (np.round: half to even)
                 eps = (math.pi + b) - two_pi_n * np.rint((b + math.pi) / two_pi_n)
             else:
                 eps = (math.pi - b) + two_pi_n * np.rint((b - math.pi) / two_pi_n)
