@@ -41,6 +41,7 @@ import trimesh
 from ..em.materials import ITU_MATERIALS, Material, material_from_sionna
 from ..errors import SceneError, WavepathsError
 from .model import WavepathsWarning
+from .obj_faces import concave_obj_faces
 
 _RADIO_BSDFS = ("itu-radio-material", "radio-material", "absorber-radio-material")
 # Mitsuba objects that carry no geometry or radio material: read past, not an error.
@@ -399,6 +400,23 @@ def _unit_cube() -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(box.vertices, float), np.asarray(box.faces, np.int64)
 
 
+def _warn_concave_faces(mesh_path: str, where: str, sid: str) -> None:
+    """Warn (naming the file and a face) when an OBJ file of a shape has concave faces,
+    whose fan triangles, in Mitsuba 3 as in wavepaths' XML reader, cover area outside them."""
+    faces = concave_obj_faces(mesh_path)
+    if not faces:
+        return
+    first = faces[0]
+    warnings.warn(
+        f"{where}: shape '{sid}': {mesh_path} has {len(faces)} concave face(s), e.g. line "
+        f"{first.line}: '{first.statement}'. Mitsuba 3 (and so Sionna RT) splits every "
+        "OBJ face into a fan from its first vertex and wavepaths keeps the same triangles in XML scenes, "
+        f"so both engines see fan triangles covering {first.fan_area:.6g} m^2 where that face has "
+        f"{first.area:.6g} m^2: split concave faces into triangles in the file",
+        WavepathsWarning, stacklevel=5,
+    )
+
+
 def _shape_geometry(shape: ET.Element, src: _Source, sid: str) -> tuple[np.ndarray, np.ndarray]:
     """Vertices ``(v, 3)`` [m] in world coordinates and faces ``(f, 3)`` of one shape."""
     where = src.path
@@ -411,9 +429,13 @@ def _shape_geometry(shape: ET.Element, src: _Source, sid: str) -> tuple[np.ndarr
         if mesh_path is None:
             raise SceneError(f"{where}: shape '{sid}' references a missing mesh file '{fname}'")
         try:
+            # trimesh splits an OBJ face into a fan from its first vertex, as Mitsuba 3 does
+            # (src/shapes/obj.cpp): both engines see the same triangles, even of a concave face.
             mesh = trimesh.load(mesh_path, force="mesh", process=False)
         except Exception as exc:
             raise SceneError(f"{mesh_path}: cannot read mesh ({exc})") from None
+        if stype == "obj":
+            _warn_concave_faces(mesh_path, where, sid)
         v = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
         f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
         if len(f) == 0:

@@ -1,0 +1,468 @@
+"""OBJ faces of four or more vertices: finding those a fan triangulates wrongly, and ear clipping.
+
+trimesh (and Mitsuba 3, ``src/shapes/obj.cpp``) split every OBJ face into a fan from its
+first vertex, which covers area outside a concave face (an L-shaped roof gains the square
+that closes the L). :func:`fixed_obj_text` rewrites the faces whose fan would leave them,
+or that are not planar, as triangles from :func:`triangulate_polygon` (ear clipping in the
+face's plane), with warnings for bent and self-intersecting faces;
+:func:`concave_obj_faces` lists the concave faces for the XML reader, which keeps the fans
+as Mitsuba does (docs/scenes.md).
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from .model import WavepathsWarning
+from .tolerances import SceneTolerances
+
+
+# Separators and vertex references of OBJ statements; a backslash at the end of a line
+# continues the statement (trimesh joins such lines too).
+_SEP = r"(?:[ \t]|\\\n)+"
+_REF = r"[^\s#\\]+"
+# Vertex lines as trimesh counts them ("\nv "): the first three numbers are the position.
+_OBJ_VERTEX = re.compile(rf"^v [ \t]*({_REF}){_SEP}({_REF}){_SEP}({_REF})", re.MULTILINE)
+# Face statements with four or more vertex references (the rest of the line is a comment).
+_OBJ_POLYGON = re.compile(rf"^f(?:{_SEP}{_REF}){{4,}}[^\n]*", re.MULTILINE)
+
+
+def obj_vertices(text: str) -> np.ndarray | None:
+    """Vertex positions ``(v, 3)`` [m] of an OBJ text, or None if a ``v`` line is not numbers."""
+    rows = _OBJ_VERTEX.findall(text)
+    if not rows:
+        return np.zeros((0, 3))
+    try:
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        return None
+
+
+def _refs(statement: str) -> list[str]:
+    """Vertex references of an ``f`` statement, as written (``"12"``, ``"12/3"``, ``"12/3/7"``)."""
+    return statement.split("#", 1)[0].replace("\\\n", " ").split()[1:]
+
+
+def _vertex_indices(refs: list[str], count: int) -> tuple[np.ndarray, np.ndarray]:
+    """0-based vertex indices of references, read as trimesh reads them (a negative index
+    counts from the end of the file's vertices), and whether each is a vertex of the file."""
+    heads = [r.split("/", 1)[0] for r in refs]
+    try:
+        k = np.array(heads, dtype=np.int64)
+    except ValueError:
+        k = np.array([int(h) if h.lstrip("+-").isdigit() else 0 for h in heads], dtype=np.int64)
+    index = np.where(k > 0, k - 1, count + k)
+    return index, (k != 0) & (index >= 0) & (index < count)
+
+
+def _line_numbers(text: str, starts: np.ndarray) -> np.ndarray:
+    """Line numbers (1-based) of positions in ``text``, in one pass."""
+    lines = np.empty(len(starts), np.int64)
+    line, pos = 1, 0
+    for j in np.argsort(starts, kind="stable"):
+        line += text.count("\n", pos, int(starts[j]))
+        pos = int(starts[j])
+        lines[j] = line
+    return lines
+
+
+def _statement(text: str, start: int, end: int, limit: int = 60) -> str:
+    """The ``f`` statement at ``text[start:end]``, shortened to ``limit`` characters (for messages)."""
+    out = "f " + " ".join(_refs(text[start:end]))
+    return out if len(out) <= limit else out[: limit - 3] + "..."
+
+
+def _extent(points: np.ndarray, axis: int | None = None) -> np.ndarray | float:
+    """Length of the bounding-box diagonal [m] of finite points (the rows of ``points``,
+    or along ``axis`` of a stack of point sets)."""
+    if axis is not None:
+        return np.linalg.norm(np.ptp(points, axis=axis), axis=-1)
+    finite = points[np.isfinite(points).all(axis=1)]
+    return float(np.linalg.norm(np.ptp(finite, axis=0))) if len(finite) else 0.0
+
+
+# ----------------------------------------------------------------------------- polygon geometry
+
+
+@dataclass(frozen=True)
+class PolygonPlanes:
+    """The planes of ``m`` polygons of ``k`` vertices, and their vertices in plane coordinates.
+
+    Attributes
+    ----------
+    normal : (m, 3) float64
+        Unit normals (Newell's method: the right-hand rule on the vertex order).
+    area : (m,) float64
+        Areas of the polygons projected on their planes [m^2].
+    deviation : (m,) float64
+        Largest distance of a vertex from the plane through the vertices' centroid [m].
+    uv : (m, k, 2) float64
+        Vertices in an orthonormal frame of each plane, turning counter-clockwise.
+    valid : (m,) bool
+        False for a polygon of no area (below ``eps`` times its size): the other
+        attributes of that row mean nothing.
+    """
+
+    normal: np.ndarray
+    area: np.ndarray
+    deviation: np.ndarray
+    uv: np.ndarray
+    valid: np.ndarray
+
+
+def polygon_planes(points: np.ndarray, eps: float) -> PolygonPlanes:
+    """The planes of a stack of 3-D polygons of the same vertex count.
+
+    Parameters
+    ----------
+    points : (m, k, 3) float64
+        Vertices [m], in order, finite.
+    eps : float
+        Length below which detail is unresolved [m].
+    """
+    p = points - points.mean(axis=1, keepdims=True)
+    vector_area = 0.5 * np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)
+    area = np.linalg.norm(vector_area, axis=1)
+    valid = area > eps * np.maximum(_extent(points, axis=1), eps)
+    normal = np.where(valid[:, None], vector_area, [0.0, 0.0, 1.0]) / np.where(valid, area, 1.0)[:, None]
+    helper = np.eye(3)[np.argmin(np.abs(normal), axis=1)]
+    u = np.cross(helper, normal)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(normal, u)  # u x w = normal: each polygon turns counter-clockwise in (u, w)
+    uv = np.stack([np.einsum("mkd,md->mk", p, u), np.einsum("mkd,md->mk", p, w)], axis=-1)
+    deviation = np.abs(np.einsum("mkd,md->mk", p, normal)).max(axis=1)
+    return PolygonPlanes(normal, area, deviation, uv, valid)
+
+
+def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """z component of the cross product of 2-D vectors (last axis)."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def fan_doubled_areas(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Signed doubled areas ``(..., k - 2)`` of the fan triangles ``(0, i, i + 1)`` of
+    polygons ``(..., k, 2)`` in plane coordinates (positive: turning like the polygon), and
+    the triangles' longest sides [m]. A doubled area over the longest side is the smallest
+    height of the triangle."""
+    a, b, c = uv[..., :1, :], uv[..., 1:-1, :], uv[..., 2:, :]
+    longest = np.maximum.reduce([np.linalg.norm(b - a, axis=-1), np.linalg.norm(c - b, axis=-1),
+                                 np.linalg.norm(c - a, axis=-1)])
+    return _cross2(b - a, c - a), longest
+
+
+def fan_is_valid(uv: np.ndarray, eps: float) -> np.ndarray:
+    """``(...)`` bool: the fan from the first vertex triangulates the polygon ``(..., k, 2)``:
+    every fan triangle turns counter-clockwise with every height above ``eps`` (none leaves
+    the polygon, none is degenerate, no fan diagonal passes through a vertex)."""
+    doubled, longest = fan_doubled_areas(uv)
+    return np.all(doubled > eps * longest, axis=-1)
+
+
+def _drop_repeated(uv: np.ndarray, eps: float) -> np.ndarray:
+    """Indices of the vertices kept once consecutive repeats (within ``eps``) are dropped."""
+    keep = [0]
+    for i in range(1, len(uv)):
+        if np.hypot(*(uv[i] - uv[keep[-1]])) > eps:
+            keep.append(i)
+    while len(keep) > 1 and np.hypot(*(uv[keep[-1]] - uv[keep[0]])) <= eps:
+        keep.pop()
+    return np.array(keep)
+
+
+class _EarClipper:
+    """Ear clipping of a counter-clockwise polygon in the plane, robust to collinear vertices.
+
+    A vertex is an ear tip when it is strictly convex (farther than ``eps`` from the line
+    through its neighbours) and no reflex or flat vertex lies in (or within ``eps`` of) the
+    triangle it makes with its neighbours, a vertex on the new diagonal included. Only
+    reflex and flat vertices can lie in an ear, and clipping a tip changes the status of
+    its two neighbours only, so each test costs O(k) and there are O(k) tests: O(k^2).
+    """
+
+    def __init__(self, uv: np.ndarray, eps: float) -> None:
+        self.uv = uv
+        self.eps = eps
+        k = len(uv)
+        self.prv = np.roll(np.arange(k), 1)
+        self.nxt = np.roll(np.arange(k), -1)
+        self.alive = np.ones(k, bool)
+        self.convex = self._convexity(np.arange(k)) > 0
+        self.clean = True  # every clip was an ear (False for a self-intersecting polygon)
+
+    def _convexity(self, idx: np.ndarray) -> np.ndarray:
+        """Doubled area of (prev, i, next) minus ``eps`` times |next - prev|: positive at
+        strictly convex vertices."""
+        a, b, c = self.uv[self.prv[idx]], self.uv[idx], self.uv[self.nxt[idx]]
+        return _cross2(b - a, c - b) - self.eps * np.linalg.norm(c - a, axis=-1)
+
+    def _is_ear(self, i: int) -> bool:
+        if not self.convex[i]:
+            return False
+        a, c = self.prv[i], self.nxt[i]
+        cand = np.flatnonzero(self.alive & ~self.convex)
+        cand = cand[(cand != a) & (cand != c)]
+        if cand.size == 0:
+            return True
+        q = self.uv[cand]
+        corners = self.uv[[a, i, c]]
+        inside = np.ones(len(q), bool)
+        for p0, p1 in zip(corners, np.roll(corners, -1, axis=0)):
+            edge = p1 - p0
+            inside &= _cross2(edge, q - p0) >= -self.eps * np.hypot(*edge)
+        on_corner = (np.linalg.norm(q[:, None, :] - corners[None], axis=2) <= self.eps).any(axis=1)
+        return not np.any(inside & ~on_corner)
+
+    def _fallback(self) -> int:
+        """The most convex remaining vertex, clipped when no ear exists (self-intersection)."""
+        self.clean = False
+        idx = np.flatnonzero(self.alive)
+        return int(idx[np.argmax(self._convexity(idx))])
+
+    def _clip(self, i: int) -> tuple[int, int, int]:
+        a, c = int(self.prv[i]), int(self.nxt[i])
+        self.nxt[a], self.prv[c] = c, a
+        self.alive[i] = False
+        self.convex[[a, c]] = self._convexity(np.array([a, c])) > 0
+        return a, i, c
+
+    def run(self) -> np.ndarray:
+        """Triangles ``(k - 2, 3)`` of indices into ``uv``."""
+        k = len(self.uv)
+        tris = []
+        pending = deque(range(k))
+        rescans = 2  # exact arithmetic never needs one; bounded, so the cost stays O(k^2)
+        while k - len(tris) > 3:
+            ear = None
+            while pending and ear is None:
+                i = pending.popleft()
+                if self.alive[i] and self._is_ear(i):
+                    ear = i
+            if ear is None and rescans:
+                rescans -= 1
+                pending.extend(np.flatnonzero(self.alive).tolist())
+                continue
+            tri = self._clip(self._fallback() if ear is None else ear)
+            tris.append(tri)
+            pending.extendleft((tri[2], tri[0]))
+        last = int(np.flatnonzero(self.alive)[0])
+        tris.append((int(self.prv[last]), last, int(self.nxt[last])))
+        return np.array(tris, dtype=np.int64).reshape(-1, 3)
+
+
+def triangulate_polygon(uv: np.ndarray, eps: float) -> tuple[np.ndarray, bool]:
+    """Triangulate a simple polygon given counter-clockwise in plane coordinates.
+
+    Parameters
+    ----------
+    uv : (k, 2) float64
+        Vertices, counter-clockwise (a row of :attr:`PolygonPlanes.uv`).
+    eps : float
+        Length below which detail is unresolved [m]: vertices closer than ``eps`` to a line
+        count as on it, repeated vertices closer than ``eps`` are used once.
+
+    Returns
+    -------
+    triangles : (m, 3) int64
+        Indices into ``uv``, counter-clockwise; ``m = k - 2`` when no vertex repeats. The
+        triangles cover the polygon exactly, without new vertices.
+    clean : bool
+        False for a polygon that is not simple (edges crossing): some step found no ear, or
+        the triangles' total area differs from the polygon's signed area by more than
+        ``eps`` times its perimeter. The triangles then cover some other region.
+    """
+    keep = _drop_repeated(uv, eps)
+    if len(keep) < 3:
+        return np.zeros((0, 3), np.int64), False
+    clipper = _EarClipper(uv[keep], eps)
+    tris = keep[clipper.run()]
+    a, b, c = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]
+    covered = np.abs(_cross2(b - a, c - a)).sum() / 2
+    signed = _cross2(uv, np.roll(uv, -1, axis=0)).sum() / 2
+    perimeter = np.linalg.norm(uv - np.roll(uv, -1, axis=0), axis=1).sum()
+    return tris, clipper.clean and abs(covered - signed) <= eps * perimeter
+
+
+# ----------------------------------------------------------------------------- OBJ faces, fixed
+
+
+@dataclass(frozen=True)
+class _ObjFaces:
+    """The faces of an OBJ text with one vertex count ``k >= 4``.
+
+    Attributes
+    ----------
+    start, end : (m,) int64
+        Spans of their ``f`` statements in the text.
+    planes : PolygonPlanes
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    planes: PolygonPlanes
+
+
+def _obj_faces(text: str, eps_of: float) -> tuple[list[_ObjFaces], float] | None:
+    """The faces of four or more vertices of an OBJ text, grouped by vertex count, and the
+    diagonal of the file's vertices [m]; None when there are none.
+
+    Faces with a reference that is not a vertex of the file, or with non-finite
+    coordinates, are left out (trimesh and the scene builder report those).
+    ``eps_of`` times the diagonal is the length below which a face has no area.
+    """
+    if not _OBJ_POLYGON.search(text):
+        return None
+    vertices = obj_vertices(text)
+    if vertices is None:
+        return None  # not numbers: trimesh reports it
+    groups: dict[int, tuple[list[int], list[int], list[str]]] = {}
+    for match in _OBJ_POLYGON.finditer(text):
+        refs = _refs(match.group(0))
+        starts, ends, flat = groups.setdefault(len(refs), ([], [], []))
+        starts.append(match.start())
+        ends.append(match.end())
+        flat.extend(refs)
+    diagonal = _extent(vertices)
+    out = []
+    for k, (starts, ends, flat) in groups.items():
+        index, ok = _vertex_indices(flat, len(vertices))
+        index, ok = index.reshape(-1, k), ok.reshape(-1, k).all(axis=1)
+        points = vertices[np.where(ok[:, None], index, 0)]
+        keep = ok & np.isfinite(points).all(axis=(1, 2))
+        if keep.any():
+            out.append(_ObjFaces(np.array(starts)[keep], np.array(ends)[keep],
+                                 polygon_planes(points[keep], eps_of * diagonal)))
+    return out, diagonal
+
+
+def fixed_obj_text(text: str, path: str, tolerances: SceneTolerances) -> str | None:
+    """The OBJ text with every face whose fan would leave it replaced by its ear-clipping
+    triangles (same vertex references, same place in the file, so objects, groups and
+    materials are read as before), or None when trimesh's fans are all right.
+
+    Warns (:class:`WavepathsWarning`) about faces that are not planar within
+    ``tolerances.plane_distance`` of the file's diagonal and faces that are not simple.
+    """
+    found = _obj_faces(text, tolerances.weld)
+    if found is None:
+        return None
+    batches, diagonal = found
+    eps, flat = tolerances.weld * diagonal, tolerances.plane_distance * diagonal
+    fixes: list[tuple[int, int, str]] = []
+    bent: list[tuple[float, int, int]] = []  # (distance from the plane, start, end)
+    tangled: list[tuple[int, int]] = []
+    for b in batches:
+        valid = b.planes.valid
+        for i in np.flatnonzero(valid & (b.planes.deviation > flat)):
+            bent.append((float(b.planes.deviation[i]), int(b.start[i]), int(b.end[i])))
+        for i in np.flatnonzero(valid & ~fan_is_valid(b.planes.uv, eps)):
+            start, end = int(b.start[i]), int(b.end[i])
+            tris, clean = triangulate_polygon(b.planes.uv[i], eps)
+            refs = _refs(text[start:end])
+            fixes.append((start, end, "\n".join("f " + " ".join(refs[j] for j in t) for t in tris)))
+            if not clean:
+                tangled.append((start, end))
+    _warn_bent(text, path, bent, flat)
+    _warn_tangled(text, path, tangled)
+    return _replaced(text, fixes) if fixes else None
+
+
+def _replaced(text: str, fixes: list[tuple[int, int, str]]) -> str:
+    """``text`` with the spans ``(start, end)`` replaced (spans do not overlap)."""
+    pieces, last = [], 0
+    for start, end, new in sorted(fixes):
+        pieces += [text[last:start], new]
+        last = end
+    return "".join(pieces) + text[last:]
+
+
+def _where(text: str, start: int, end: int) -> str:
+    """``line 12: 'f 1 2 3 4 5 6'``: a face, for messages."""
+    return f"line {_line_numbers(text, np.array([start]))[0]}: '{_statement(text, start, end)}'"
+
+
+def _warn_bent(text: str, path: str, bent: list[tuple[float, int, int]], flat: float) -> None:
+    if not bent:
+        return
+    dev, start, end = max(bent)
+    warnings.warn(
+        f"{path}: {len(bent)} face(s) of four or more vertices are not planar (up to {dev:.3g} m from their "
+        f"mean plane, more than {flat:.3g} m, at {_where(text, start, end)}); wavepaths splits each into "
+        "triangles (a fan from its first vertex, or ear clipping in its mean plane when the fan would leave "
+        "the face), one of several surfaces these vertices bound: split such faces in the file",
+        WavepathsWarning, stacklevel=6,
+    )
+
+
+def _warn_tangled(text: str, path: str, tangled: list[tuple[int, int]]) -> None:
+    if tangled:
+        warnings.warn(
+            f"{path}: {len(tangled)} face(s) are not simple polygons (edges crossing, e.g. "
+            f"{_where(text, *tangled[0])}); their triangles cover another region than intended",
+            WavepathsWarning, stacklevel=6,
+        )
+
+
+def read_obj_text(path: str) -> str:
+    with open(path, "rb") as fh:
+        return trimesh.util.decode_text(fh.read()).replace("\r\n", "\n")
+
+
+@dataclass(frozen=True)
+class ConcaveFace:
+    """An OBJ face whose fan from its first vertex leaves it.
+
+    Attributes
+    ----------
+    line : int
+        Line number (1-based) of its ``f`` statement.
+    statement : str
+        The statement (shortened).
+    area : float
+        Area of the face [m^2].
+    fan_area : float
+        Total area of its fan triangles [m^2], each counted positive, as a mesh counts them.
+    """
+
+    line: int
+    statement: str
+    area: float
+    fan_area: float
+
+
+def concave_obj_faces(path: str, tolerances: SceneTolerances | None = None) -> list[ConcaveFace]:
+    """The faces of an OBJ file that a fan from their first vertex triangulates wrongly.
+
+    Mitsuba 3 splits every OBJ face so (``src/shapes/obj.cpp``), and so does trimesh: the
+    fan triangles of these faces cover area outside them (concave faces), in file order.
+
+    Parameters
+    ----------
+    path : str
+    tolerances : SceneTolerances, optional
+        ``weld``, times the diagonal of the file's vertices, is the length below which a
+        triangle counts as flat.
+    """
+    tol = tolerances or SceneTolerances()
+    text = read_obj_text(path)
+    found = _obj_faces(text, tol.weld)
+    if found is None:
+        return []
+    batches, diagonal = found
+    eps = tol.weld * diagonal
+    rows = []
+    for b in batches:
+        doubled, longest = fan_doubled_areas(b.planes.uv)
+        inverted = b.planes.valid & np.any(doubled < -eps * longest, axis=1)  # the fan leaves the face
+        for i in np.flatnonzero(inverted):
+            rows.append((int(b.start[i]), int(b.end[i]), float(b.planes.area[i]), float(np.abs(doubled[i]).sum() / 2)))
+    rows.sort()
+    lines = _line_numbers(text, np.array([r[0] for r in rows], np.int64))
+    return [ConcaveFace(int(n), _statement(text, s, e), a, f) for n, (s, e, a, f) in zip(lines, rows)]
+
+
