@@ -45,10 +45,21 @@ def json_text(value, indent: int | None = 1) -> str:
     return json.dumps(json_ready(value), indent=indent, allow_nan=False)
 
 
+SCENE_HELP = "built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)"
+
+
+def add_scene_arguments(p: argparse.ArgumentParser) -> None:
+    """The positional ``scene`` and ``--up-axis`` (:func:`wavepaths.scene.load_scene`'s ``up_axis``)."""
+    p.add_argument("scene", help=SCENE_HELP)
+    p.add_argument("--up-axis", choices=["auto", "y", "z"], default="auto",
+                   help="the up axis of a mesh file: auto (default: +Y for glTF/GLB, rotated to +Z; +Z for the "
+                        "others), y (rotate any mesh file from +Y up), z (keep the file's coordinates)")
+
+
 def _scene(args):
     from .scene import load_scene
 
-    return load_scene(args.scene)
+    return load_scene(args.scene, up_axis=getattr(args, "up_axis", "auto"))
 
 
 def _cmd_info(args) -> int:
@@ -214,12 +225,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("info", help="describe a scene: triangles, polygons, dihedra")
-    p.add_argument("scene", help="built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)")
+    add_scene_arguments(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("paths", help="list the propagation paths between transmitters and receivers")
-    p.add_argument("scene")
+    add_scene_arguments(p)
     p.add_argument("--tx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"))
     p.add_argument("--rx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"))
     _add_trace_flags(p)
@@ -227,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_cmd_paths)
 
-    for name, hook in _EXTRA_COMMANDS:
+    for _name, hook in _extra_commands():
         hook(sub)
     return parser
 
@@ -238,18 +249,19 @@ def _version() -> str:
     return f"wavepaths {__version__}"
 
 
-_EXTRA_COMMANDS: list[tuple[str, Callable]] = []
-
-
-def _register_extra() -> None:
-    """Subcommands that live in their own modules (coverage, validate, bench)."""
+def _extra_commands() -> list[tuple[str, Callable]]:
+    """Subcommands that live in their own modules (coverage, validate, bench): (name, the hook
+    that adds its parser). Looked up per parser, so that ``main`` can run more than once in a
+    process (it appended to a module-level list, and a second parser met the same subcommand twice)."""
+    hooks = []
     for module, name in (("wavepaths.coverage.cli", "coverage"), ("wavepaths.validation.cli", "validate"),
                          ("wavepaths.bench.cli", "bench")):
         try:
             mod = __import__(module, fromlist=["add_parser"])
         except ImportError:
             continue
-        _EXTRA_COMMANDS.append((name, mod.add_parser))
+        hooks.append((name, mod.add_parser))
+    return hooks
 
 
 def _prepare_out(args) -> None:
@@ -266,7 +278,6 @@ def _prepare_out(args) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    _register_extra()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -280,6 +291,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`wavepaths info ... | head`): not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

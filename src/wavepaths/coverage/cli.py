@@ -16,7 +16,7 @@ QUANTITIES = ("path_gain_db", "received_power_dbm", "field_strength_dbuv_m", "lo
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """Register the ``coverage`` subcommand on the ``wavepaths`` parser's subparsers."""
-    from ..cli import _add_field_flags, _add_trace_flags
+    from ..cli import _add_field_flags, _add_trace_flags, add_scene_arguments
 
     p = sub.add_parser(
         "coverage",
@@ -24,7 +24,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         description="Trace every cell of a horizontal grid (or the faces of a measurement mesh) and write "
                     "DIR/coverage.png and DIR/coverage.npz.",
     )
-    p.add_argument("scene", help="built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)")
+    add_scene_arguments(p)
     p.add_argument("--tx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"),
                    help="transmitter position [m]; repeat for several (the map shows the best server)")
     p.add_argument("--height", type=float, help="height z of the grid [m] (planar grid)")
@@ -92,13 +92,12 @@ def _client(address: str):
 
 
 def run(args) -> int:
-    from ..cli import _field_config, _trace_options, json_text
-    from ..scene import load_scene
+    from ..cli import _field_config, _scene, _trace_options, json_text
     from .plot import save_png
     from .solver import CoverageOptions, coverage
 
     fields = _field_config(args)  # checked before any work
-    scene = load_scene(args.scene)
+    scene = _scene(args)
     grid = _grid(args, scene)
     settings = CoverageOptions(tile_size=args.tile_size, coherent=not args.incoherent, workers=args.workers,
                                threads=args.threads, mask_inside=not args.keep_inside)
