@@ -28,6 +28,10 @@ LAUNCHED_OPTIONS = {"max_reflections": 2, "diffraction": True, "diffraction_refl
                     "diffraction_candidates": "launched", "reflection_candidates": "launched"}
 """The target's settings with launched candidates (:mod:`wavepaths.search.launch`)."""
 TARGET_BYTES = 8 << 30
+CHECK_BYTES = 16 << 30
+"""Address-space limit of :func:`munich_check`, which is no part of the target: its exhaustive
+search holds the transmitter's order-2 (chain, edge) sources (46.7 M in the fifteenth session; twenty-fourth session:
+7.1 GB peak resident, process and threads; under an 8 GiB address-space limit it ran out)."""
 
 
 def _write(path: str, data: dict) -> None:
@@ -291,7 +295,7 @@ def run_munich(out_dir: str, timeout_s: float = 1800.0, memory_limit: int = TARG
             cfile = os.path.join(out_dir, "munich_check_progress.json")
             rc = run_isolated("wavepaths.bench.munich", "munich_check",
                               {"progress_file": cfile, "cells": check_cells, "cell_size": cell_size},
-                              timeout_s=sample_timeout_s, memory_limit_bytes=memory_limit)
+                              timeout_s=sample_timeout_s, memory_limit_bytes=max(memory_limit, CHECK_BYTES))
             launched_out["check"] = dict(rc["result"]) if rc["ok"] else {"error": rc.get("error"),
                                                                          "timed_out": rc.get("timed_out", False)}
     sample = None
