@@ -169,7 +169,7 @@ def fresnel(kind, eta, thickness_over_lambda, slab, c):
     if kind == KIND_ABSORBER:
         return 0j, 0j
     c = min(abs(c), 1.0)
-    huge = abs(eta) > _HUGE  # a perfect conductor to rounding (wavepaths.em.fresnel._HUGE)
+    huge = eta.real * eta.real + eta.imag * eta.imag > _HUGE * _HUGE  # |eta| > _HUGE (inf past 1e154): a perfect conductor
     if huge:
         eta = 2.0 + 0j  # a stand-in that keeps the squares below finite; overridden after them
     # _half_space_parts, with root = sqrt((eta - 1) + c^2), den = (c + root)^2, (eta c + root)^2
