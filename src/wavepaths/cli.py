@@ -49,17 +49,22 @@ SCENE_HELP = "built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)"
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
-    """The positional ``scene`` and ``--up-axis`` (:func:`wavepaths.scene.load_scene`'s ``up_axis``)."""
+    """The positional ``scene``, ``--up-axis`` and ``--material`` (:func:`wavepaths.scene.load_scene`'s
+    ``up_axis`` and ``material``)."""
     p.add_argument("scene", help=SCENE_HELP)
     p.add_argument("--up-axis", choices=["auto", "y", "z"], default="auto",
                    help="the up axis of a mesh file: auto (default: +Y for glTF/GLB, rotated to +Z; +Z for the "
                         "others), y (rotate any mesh file from +Y up), z (keep the file's coordinates)")
+    p.add_argument("--material", metavar="NAME",
+                   help="material of a mesh file's triangles that name no known material (OBJ usemtl, glTF "
+                        "materials named after ITU-R P.2040 materials are used): pec (default), absorber or an "
+                        "ITU-R P.2040 name such as concrete")
 
 
 def _scene(args):
     from .scene import load_scene
 
-    return load_scene(args.scene, up_axis=getattr(args, "up_axis", "auto"))
+    return load_scene(args.scene, up_axis=getattr(args, "up_axis", "auto"), material=getattr(args, "material", None))
 
 
 def _cmd_info(args) -> int:

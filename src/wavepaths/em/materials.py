@@ -29,7 +29,9 @@ __all__ = [
     "ITU_MATERIALS",
     "PEC",
     "Material",
+    "as_material",
     "itu_material",
+    "material_by_name",
     "material_from_sionna",
     "relative_permittivity",
 ]
@@ -169,6 +171,44 @@ def itu_material(name: str, thickness_m: float = DEFAULT_THICKNESS_M) -> Materia
             f"unknown ITU material {name!r}; valid names: {', '.join(sorted(ITU_MATERIALS))}"
         ) from None
     return dataclasses.replace(base, thickness_m=float(thickness_m))
+
+
+def material_by_name(name: str) -> Material | None:
+    """The material a mesh file's material name stands for, or None.
+
+    ``"pec"`` and ``"absorber"``, and the ITU-R P.2040 names of :data:`ITU_MATERIALS`, bare
+    or with Sionna's prefixes (``concrete``, ``itu_concrete``, ``itu-concrete``,
+    ``mat-itu_concrete``), in any case; names with spaces or dashes between words match
+    their underscored form (``Medium Dry Ground``).
+    """
+    key = name.strip().lower()
+    key = key[4:] if key.startswith("mat-") else key
+    key = key[4:] if key.startswith(("itu_", "itu-")) else key
+    key = "_".join(key.replace("-", " ").split())
+    if key == "pec":
+        return PEC
+    if key == "absorber":
+        return ABSORBER
+    return itu_material(key) if key in ITU_MATERIALS else None
+
+
+def as_material(value: "Material | str", what: str = "material") -> Material:
+    """``value`` as a :class:`Material`: a Material itself, or a name :func:`material_by_name` knows.
+
+    Raises
+    ------
+    WavepathsError
+        Any other value (the message lists the names).
+    """
+    if isinstance(value, Material):
+        return value
+    if isinstance(value, str):
+        found = material_by_name(value)
+        if found is not None:
+            return found
+        raise WavepathsError(f"{what}: unknown material name {value!r}; use 'pec', 'absorber' or an ITU-R P.2040 "
+                             f"name: {', '.join(sorted(ITU_MATERIALS))}")
+    raise WavepathsError(f"{what} must be a Material or a material name, got {type(value).__name__}")
 
 
 def relative_permittivity(

@@ -16,16 +16,19 @@ from __future__ import annotations
 
 import io
 import os
+import warnings
+from collections.abc import Mapping
 from typing import Literal
 
 import numpy as np
 import trimesh
 
-from ..em.materials import PEC, Material
+from ..em.materials import PEC, Material, as_material, material_by_name
 from ..errors import SceneError, WavepathsError
 from .builtin import BUILTIN_SCENES, builtin_arrays
 from .mitsuba import read_mitsuba_xml
-from .model import Scene, build_scene
+from .model import Scene, WavepathsWarning, build_scene
+from .obj_reader import read_obj
 from .obj_faces import fixed_obj_text, read_obj_text
 from .tolerances import SceneTolerances
 
@@ -77,8 +80,76 @@ def _rotates_to_z_up(ext: str, up_axis: str) -> bool:
     return up_axis == "y" or (up_axis == "auto" and ext in Y_UP_FORMATS)
 
 
+def _part_material_name(geom: trimesh.Trimesh) -> str | None:
+    """The material name trimesh kept for a part (glTF materials, OBJ with its ``.mtl``), or None."""
+    name = getattr(getattr(getattr(geom, "visual", None), "material", None), "name", None)
+    return str(name) if name else None
+
+
+def _resolve_materials(path: str, names: tuple[str, ...], default: Material,
+                       materials: Mapping[str, Material | str] | None) -> tuple[list[Material], list[str]]:
+    """The material of each of a file's material ``names``, and the names left to ``default``.
+
+    ``materials`` (name -> Material or material name) first, then the names
+    :func:`~wavepaths.em.materials.material_by_name` knows (``itu_concrete``, ``glass``, ``pec``...).
+    """
+    mapping = {str(k): as_material(v, f"materials[{k!r}]") for k, v in (materials or {}).items()}
+    out, unknown = [], []
+    for name in names:
+        found = mapping.get(name) or material_by_name(name)
+        if found is None:
+            unknown.append(name)
+        out.append(found or default)
+    return out, unknown
+
+
+def _warn_unknown_materials(path: str, unknown: list[str], default: Material) -> None:
+    if unknown:
+        warnings.warn(
+            f"{path}: material name(s) {', '.join(repr(n) for n in unknown[:8])}{' ...' if len(unknown) > 8 else ''} "
+            f"are no ITU-R P.2040 name, 'pec' or 'absorber': their triangles get the default material "
+            f"{default.name!r}; map them with load_scene(..., materials={{name: material}})",
+            WavepathsWarning, stacklevel=4,
+        )
+
+
+def _used_materials(tmat: np.ndarray, table: list[Material]) -> tuple[np.ndarray, tuple[Material, ...]]:
+    """``tmat`` re-indexed into the materials it uses, equal materials merged, in table order."""
+    distinct: list[Material] = []
+    remap = np.zeros(len(table), np.int64)
+    present = set(np.unique(tmat).tolist())
+    for i, m in enumerate(table):
+        if i in present:
+            if m not in distinct:
+                distinct.append(m)
+            remap[i] = distinct.index(m)
+    return remap[tmat], tuple(distinct)
+
+
+def _read_obj_file(path: str, material: Material, tolerances: SceneTolerances | None,
+                   materials: Mapping[str, Material | str] | None):
+    """Scene arrays of an OBJ file read by :func:`~wavepaths.scene.obj_reader.read_obj`:
+    objects from its ``o`` (or ``g``) statements, materials from its ``usemtl`` names."""
+    mesh = read_obj(path, tolerances)
+    mats, unknown = _resolve_materials(path, mesh.material_names, material, materials)
+    _warn_unknown_materials(path, unknown, material)
+    tmat, table = _used_materials(mesh.triangle_material + 1, [material, *mats])  # index 0: no usemtl
+    return mesh.vertices, mesh.triangles, mesh.triangle_object, tmat, mesh.object_names, table
+
+
 def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances | None = None,
-                    up_axis: str = "auto"):
+                    up_axis: str = "auto", materials: Mapping[str, Material | str] | None = None):
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".obj":
+        try:
+            v, t, o, m, names, table = _read_obj_file(path, material, tolerances, materials)
+        except (SceneError, WavepathsError):
+            raise
+        except Exception as exc:
+            raise SceneError(f"{path}: cannot read mesh ({exc})") from None
+        if _rotates_to_z_up(ext, up_axis):
+            v = v @ Y_UP_TO_Z_UP.T
+        return v, t, o, m, names, table
     try:
         loaded = _trimesh_load(path, tolerances or SceneTolerances())
     except Exception as exc:
@@ -86,7 +157,12 @@ def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances |
     parts = _trimesh_parts(loaded, path)
     if not parts:
         raise SceneError(f"{path}: the mesh has no faces")
-    verts, tris, tobj = [], [], []
+    part_names = [_part_material_name(g) for _, g in parts]
+    used = tuple(dict.fromkeys(n for n in part_names if n is not None))
+    mats, unknown = _resolve_materials(path, used, material, materials)
+    _warn_unknown_materials(path, unknown, material)
+    index = {n: i + 1 for i, n in enumerate(used)}
+    verts, tris, tobj, tmat = [], [], [], []
     offset = 0
     for i, (_, g) in enumerate(parts):
         v = np.asarray(g.vertices, np.float64)
@@ -94,12 +170,14 @@ def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances |
         verts.append(v)
         tris.append(f + offset)
         tobj.append(np.full(len(f), i))
+        tmat.append(np.full(len(f), index.get(part_names[i], 0)))
         offset += len(v)
     tri = np.concatenate(tris)
     vertices = np.concatenate(verts)
-    if _rotates_to_z_up(os.path.splitext(path)[1].lower(), up_axis):
+    if _rotates_to_z_up(ext, up_axis):
         vertices = vertices @ Y_UP_TO_Z_UP.T
-    return (vertices, tri, np.concatenate(tobj), np.zeros(len(tri), np.int64), tuple(n for n, _ in parts), (material,))
+    tmat_all, table = _used_materials(np.concatenate(tmat), [material, *mats])
+    return vertices, tri, np.concatenate(tobj), tmat_all, tuple(n for n, _ in parts), table
 
 
 def _check_up_axis(up_axis: str) -> str:
@@ -122,9 +200,10 @@ def _refuse_y_up(axis: str, source: str) -> None:
 def load_scene(
     source: str,
     *,
-    material: Material = PEC,
+    material: Material | str | None = None,
     tolerances: SceneTolerances | None = None,
     up_axis: UpAxis = "auto",
+    materials: Mapping[str, Material | str] | None = None,
 ) -> Scene:
     """Load a scene from a built-in name or a file.
 
@@ -140,9 +219,17 @@ def load_scene(
         that is not planar is split too, with a :class:`WavepathsWarning`. In XML files
         they are split as Mitsuba 3 splits them (a fan from the first vertex), with a
         warning for a concave face.
-    material : Material
-        Material of every triangle of a plain mesh file (default: perfect conductor);
-        XML files carry their own materials.
+    material : Material or str
+        Material of the triangles of a plain mesh file that name no known material
+        (default: perfect conductor): a :class:`Material` or a name, ``"pec"``,
+        ``"absorber"`` or an ITU-R P.2040 name (``"concrete"``). XML files and built-in
+        scenes carry their own materials: ``material`` and ``materials`` are ignored there,
+        with a :class:`WavepathsWarning`.
+    materials : mapping of str to Material or str, optional
+        Materials of a mesh file's own material names (OBJ ``usemtl``, glTF materials).
+        Names not in it that are ITU-R P.2040 names (bare or as Sionna writes them,
+        ``itu_concrete``, ``mat-itu_concrete``), ``pec`` or ``absorber`` get that material;
+        the others get ``material``, with a :class:`WavepathsWarning` naming them.
     tolerances : SceneTolerances, optional
     up_axis : {"auto", "y", "z"}
         The up axis of a mesh file. ``"auto"`` (default): +Y for glTF/GLB, whose
@@ -163,6 +250,13 @@ def load_scene(
         An unknown ``up_axis``.
     """
     axis = _check_up_axis(up_axis)
+    given = material is not None
+    material = PEC if material is None else as_material(material, "load_scene: `material`")
+    if materials is not None and not isinstance(materials, Mapping):
+        raise WavepathsError(f"load_scene: `materials` must be a mapping of names to materials, got {type(materials).__name__}")
+    if (given or materials) and (source in BUILTIN_SCENES or source.lower().endswith(".xml")):
+        warnings.warn(f"{source}: `material` and `materials` apply to mesh files; this scene's materials are its own",
+                      WavepathsWarning, stacklevel=2)
     if source in BUILTIN_SCENES:
         _refuse_y_up(axis, source)
         arrays = builtin_arrays(source)
@@ -175,7 +269,7 @@ def load_scene(
             _refuse_y_up(axis, source)
             arrays = read_mitsuba_xml(source)
         elif ext in MESH_FORMATS:
-            arrays = _read_mesh_file(source, material, tolerances, axis)
+            arrays = _read_mesh_file(source, material, tolerances, axis, materials)
         else:
             raise SceneError(f"{source}: unknown format '{ext}' (expected .xml or one of {', '.join(MESH_FORMATS)})")
     v, t, o, m, names, mats = arrays
