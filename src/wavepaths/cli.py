@@ -219,8 +219,20 @@ def _add_field_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=["utd", "gtd"], default="utd", help="diffraction coefficients (default utd)")
     p.add_argument("--compat", choices=["none", "sionna"], default="none",
                    help="'sionna' reproduces Sionna RT 2.2's diffraction combination")
-    p.add_argument("--polarization", choices=["V", "H"], default="V", help="antenna polarisation (default V)")
-    p.add_argument("--antenna", choices=["iso", "dipole", "hw_dipole", "tr38901"], default="iso")
+    patterns = ["iso", "dipole", "hw_dipole", "tr38901"]
+    p.add_argument("--polarization", choices=["V", "H"], default="V",
+                   help="polarisation of both antennas (default V; dual-polarised antennas, VH and cross, "
+                        "through the Python API's Antenna)")
+    p.add_argument("--antenna", choices=patterns, default="iso",
+                   help="pattern of the transmit AND the receive antenna (default iso); --tx-antenna and "
+                        "--rx-antenna set one side")
+    p.add_argument("--tx-antenna", choices=patterns, help="transmit antenna pattern (default: --antenna)")
+    p.add_argument("--rx-antenna", choices=patterns, help="receive antenna pattern (default: --antenna)")
+    for side in ("tx", "rx"):
+        p.add_argument(f"--{side}-orientation", nargs=3, type=float, default=[0.0, 0.0, 0.0],
+                       metavar=("YAW", "PITCH", "ROLL"),
+                       help=f"{'transmit' if side == 'tx' else 'receive'} antenna orientation [deg] about z, y, x "
+                            "(TR 38.901 7.1.3, as Sionna RT's; default 0 0 0: boresight along +x)")
     p.add_argument("--tx-power-dbm", type=float, default=0.0, help="transmit power [dBm] (default 0)")
 
 

@@ -121,6 +121,27 @@ def test_cli_field_strength_does_not_include_the_receive_antenna():
         assert 20 * np.log10(rec["field_strength_v_m"] * 1e6) == pytest.approx(want, abs=1e-9)
 
 
+def test_cli_antennas_per_side_and_their_orientation():
+    """``--antenna`` sets both ends; ``--tx-antenna``/``--rx-antenna`` one end each, and
+    ``--tx-orientation`` turns the transmit antenna [deg]. Line of sight along +y (200 m):
+    a TR 38.901 panel gains 8 dBi on its boresight, +x by default; yawed by 90 deg it faces
+    the receiver. Path gains against an isotropic pair, on the same path."""
+    common = ["half_plane", "--tx", 500, 500, 0, "--rx", 500, 700, 0, "--max-reflections", 0, "--no-diffraction",
+              "--json"]
+
+    def gain(*flags):
+        r = run_paths(*common, *flags)
+        assert r.returncode == 0, r.stderr
+        return strict_json(r.stdout)["receivers"][0]["path_gain_db"]
+
+    iso = gain()
+    facing = gain("--tx-antenna", "tr38901", "--tx-orientation", 90, 0, 0)
+    assert facing - iso == pytest.approx(8.0, abs=1e-6)  # the panel's maximum gain, receiver isotropic
+    both = gain("--antenna", "tr38901", "--tx-orientation", 90, 0, 0, "--rx-orientation", -90, 0, 0)
+    assert both - iso == pytest.approx(16.0, abs=1e-6)
+    assert gain("--antenna", "tr38901", "--rx-antenna", "iso", "--tx-orientation", 90, 0, 0) == pytest.approx(facing)
+
+
 # ---- strict JSON --------------------------------------------------------------------------
 def test_paths_json_is_strict_json_when_no_path_arrives():
     r = run_paths("half_plane", "--tx", -10, 5, -5, "--rx", 10, -5, -60, "--max-reflections", 0, "--no-diffraction",

@@ -82,12 +82,19 @@ class FieldConfig:
     @classmethod
     def from_cli(cls, args) -> "FieldConfig":
         """From the ``paths`` / ``coverage`` command-line flags."""
-        ant = Antenna(pattern=getattr(args, "antenna", "iso"), polarization=getattr(args, "polarization", "V"))
+        import math
+
+        def antenna(side: str) -> Antenna:
+            pattern = getattr(args, f"{side}_antenna", None) or getattr(args, "antenna", "iso")
+            yaw, pitch, roll = (math.radians(float(a)) for a in (getattr(args, f"{side}_orientation", None) or (0, 0, 0)))
+            return Antenna(pattern=pattern, polarization=getattr(args, "polarization", "V"),
+                           orientation=(yaw, pitch, roll))
+
         return cls(
             frequency_hz=args.frequency,
             model=args.model,
             compat=getattr(args, "compat", "none"),
-            tx_antenna=ant,
-            rx_antenna=ant,
+            tx_antenna=antenna("tx"),
+            rx_antenna=antenna("rx"),
             tx_power_dbm=args.tx_power_dbm,
         )
