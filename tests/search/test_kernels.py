@@ -271,7 +271,9 @@ def test_compiled_join_and_prefilter_keep_the_same_candidates_as_numpy(lit_regio
         rside = tile._receiver_side(scene, ctx_np, levels[b], np.arange(len(levels[b])), np.unique(src.dihedron),
                                     Counter(), "t")
         for budget in (1 << 21, 37):
-            monkeypatch.setattr(diffraction, "_join_ranges", lambda s, k, _b=budget: join_ranges(s, k, _b))
+            # (patched where _joined_candidates looks it up: wavepaths.search.diffraction_join)
+            monkeypatch.setattr("wavepaths.search.diffraction_join._join_ranges",
+                                lambda s, k, _b=budget: join_ranges(s, k, _b))
             got = []
             for ctx in (ctx_np, ctx_nb):
                 st = Counter()

@@ -1,10 +1,15 @@
 """Diffracted paths of a tile: one diffraction with ``a`` reflections before and ``b`` after.
 
-The transmitter side's sources (image, dihedron) come from the context, culled per chunk
-of receiver images by their Keller cones; the receiver side is
+The tile's candidate search (:func:`diffraction_tile`): the transmitter side's sources come
+from the context, culled per chunk of receiver images by their Keller cones
+(:mod:`wavepaths.search.diffraction_bounds`); the receiver side is
 :mod:`wavepaths.search.end_sides`; the two are joined on (dihedron, sector), which is the
-seed's FindDihedron test (§3.3); then the closed-form diffraction point (§2.3), the
-back-traces of the reflections on both sides and the occlusion of every leg.
+seed's FindDihedron test (§3.3), with the closed-form diffraction point (§2.3)
+(:mod:`wavepaths.search.diffraction_join`); then, here, the back-traces of the reflections
+on both sides, the pruning of weak candidates (or their pending record for the tolerance
+of coverage maps) and the occlusion of every leg (:func:`finish_diffraction`).
+
+The names of the two helper modules used elsewhere are re-exported here.
 """
 
 from __future__ import annotations
@@ -16,17 +21,28 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import kernels
-from .spheres import morton_order, vector_angle
+from .spheres import morton_order
 from .chains import CANDIDATE_BUDGET, occluded_chains, triangle_of
 from .context import TxContext
+from .diffraction_bounds import (FRAME_BLOCK, UTD_BOUND_FLOOR, KellerFrame, _diffraction_amplitude_bound,
+                                 keller_cone_keep, keller_frame)
+from .diffraction_join import _diffraction_prefilter, _join_chunks, _join_pairs, _join_ranges, _joined_candidates
 from .end_sides import _EndSide, _keller_window, _receiver_side, _receiver_side_by_tree, _transmitter_side
-from .geometry import diffraction_point_reduced
 from .images import ImageLevel, backtrace
 from .reach import MIRROR_REACH_BUDGET, MirrorReach, mirror_reach
 from .paths import InteractionType, PathBatch
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
+
+__all__ = [
+    # the tile's candidate search
+    "COMPILED_PAIR_BUDGET", "DENSE_RECEIVER_SIDE_MAX_DIHEDRA", "LISTED_CHUNK_ROWS", "PendingDiffraction",
+    "by_last_mirror", "diffraction_tile", "finish_diffraction", "spatial_order",
+    # re-exported from diffraction_bounds and diffraction_join
+    "FRAME_BLOCK", "KellerFrame", "UTD_BOUND_FLOOR", "_diffraction_amplitude_bound", "_diffraction_prefilter",
+    "_join_chunks", "_join_pairs", "_join_ranges", "_joined_candidates", "keller_cone_keep", "keller_frame",
+]
 
 # the numpy receiver side of order >= 1 is dense (matrix products over images x dihedra) up to
 # this many dihedra, tree queries above: dense was 2.6x faster with 640 (etoile_crop, R3+D2) and
@@ -40,85 +56,6 @@ receiver side (one int32 each, 32 MB; the pairs that pass, about 50 bytes each, 
 usually a few per cent): each chunk pays a fixed cost (the Keller-cone culling of every
 source, the gathers of the kept ones), larger chunks cull less. On munich's R2+D2
 strip, 2^21 pairs per chunk took 52 s, 2^23 39 s, 2^25 43 s (the same 120 paths)."""
-
-
-@dataclass(frozen=True)
-class KellerFrame:
-    """Per diffraction source (image S, dihedron from A to B, unit direction ``w``): the
-    cosines of the incident cone at the edge's ends, ``cos beta_X = w.(X - S)/|X - S|``
-    (:func:`keller_cone_keep`); the edges themselves once per distinct dihedron (munich's
-    25 M order-2 sources lie on at most its 36 k dihedra). Receiver-independent: built once
-    per context and order."""
-
-    dihedra: np.ndarray  # (u,) int64, the distinct dihedra of the sources
-    inv: np.ndarray  # (c,) int64, each source's row in ``dihedra``
-    A: np.ndarray  # (u, 3) [m]
-    B: np.ndarray  # (u, 3) [m]
-    w: np.ndarray  # (u, 3)
-    cos_a: np.ndarray  # (c,)
-    cos_b: np.ndarray  # (c,)
-
-
-FRAME_BLOCK = 1 << 20
-"""Sources per block when a :class:`KellerFrame` is built (bounds its temporaries)."""
-
-
-def keller_frame(dihedra, src, sources: np.ndarray) -> KellerFrame:
-    """The :class:`KellerFrame` of the sources ``src`` at image points ``sources`` (c, 3)."""
-    ud, inv = np.unique(src.dihedron, return_inverse=True)
-    w = np.ascontiguousarray(dihedra.direction[ud])
-    A = np.ascontiguousarray(dihedra.origin[ud])
-    B = A + dihedra.length[ud][:, None] * w
-    k = len(inv)
-    cos_a, cos_b = np.empty(k), np.empty(k)
-    for s in range(0, k, FRAME_BLOCK):
-        i, S = inv[s : s + FRAME_BLOCK], sources[s : s + FRAME_BLOCK]
-        for X, out in ((A, cos_a), (B, cos_b)):
-            v = X[i] - S
-            out[s : s + len(i)] = np.einsum("ij,ij->i", v, w[i]) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
-    return KellerFrame(ud, inv.astype(np.int64).ravel(), A, B, w, cos_a, cos_b)
-
-
-def keller_cone_keep(frame: KellerFrame, targets: np.ndarray, compiled: bool = False) -> np.ndarray | None:
-    """(c,) bool: the (source, dihedron) pairs whose Keller cones can reach a sphere around
-    ``targets``; ``None`` when all can.
-
-    Along an edge from A (t = 0) to B (t = L), a receiver R is reached at some point iff
-    ``w.(R - A)/|R - A| >= cos beta_A`` and ``w.(R - B)/|R - B| <= cos beta_B`` with
-    ``cos beta_X = w.(X - S)/|X - S|`` (the diffracted cone's opening equals the incident
-    angle, and both sides are monotonic in t). For a sphere (C, r) each side is tested
-    with the angular margin ``asin(r / |C - X|)``: conservative, so no path is lost.
-    The sphere's side depends on the dihedron only: ``cos(max(theta_A - delta_A, 0))`` and
-    ``cos(min(theta_B + delta_B, pi))`` are found once per distinct dihedron, and each
-    source compares its two cosines with them. ``compiled``: both steps as compiled loops
-    (:func:`wavepaths.search._numba.keller_cone_keep`; the same expressions).
-    """
-    if len(frame.inv) == 0 or len(targets) == 0:
-        return None
-    c = targets.mean(axis=0)
-    r = float(np.linalg.norm(targets - c, axis=1).max()) * (1 + 1e-9) + 1e-9
-    slack = 1e-9
-    if compiled and kernels.available():
-        from . import _numba
-
-        keep = np.empty(len(frame.inv), dtype=np.bool_)
-        n = _numba.keller_cone_keep(frame.A, frame.B, frame.w, frame.inv, frame.cos_a, frame.cos_b, c, r, slack, keep)
-        return None if n == len(keep) else keep
-    w = frame.w
-
-    def angle_range(X):
-        v = c - X
-        dist = np.linalg.norm(v, axis=1)
-        theta = vector_angle(v, np.broadcast_to(w, v.shape))
-        delta = np.where(dist > r, np.arcsin(np.clip(r / np.maximum(dist, 1e-300), 0, 1)), np.pi)
-        return theta, delta
-
-    th_a, de_a = angle_range(frame.A)
-    th_b, de_b = angle_range(frame.B)
-    reach_a = np.cos(np.maximum(th_a - de_a, 0.0)) + slack  # per dihedron: reached iff cos_a <= reach_a
-    reach_b = np.cos(np.minimum(th_b + de_b, np.pi)) - slack  # ... and cos_b >= reach_b
-    keep = (frame.cos_a <= reach_a[frame.inv]) & (frame.cos_b >= reach_b[frame.inv])
-    return None if keep.all() else keep
 
 
 def _mirror_reach(scene: "Scene", ctx: TxContext, a: int) -> MirrorReach | None:
@@ -138,9 +75,10 @@ def _mirror_reach(scene: "Scene", ctx: TxContext, a: int) -> MirrorReach | None:
 
 
 def _source_frames(scene: "Scene", ctx: TxContext, a: int) -> tuple[_EndSide, KellerFrame]:
-    """The transmitter side (:func:`_transmitter_side`) and the :class:`KellerFrame` of all the
-    order-``a`` diffraction sources, built once per context (``ctx.derived``); a chunk's
-    culled sources take their rows."""
+    """The transmitter side (:func:`_transmitter_side`) and the
+    :class:`~wavepaths.search.diffraction_bounds.KellerFrame` of all the order-``a``
+    diffraction sources, built once per context (``ctx.derived``); a chunk's culled sources
+    take their rows."""
     key = ("source_frames", a)
     got = ctx.derived.get(key)
     if got is None:
@@ -152,120 +90,6 @@ def _source_frames(scene: "Scene", ctx: TxContext, a: int) -> tuple[_EndSide, Ke
                        keller_frame(scene.dihedra, src, tx_lv.last[src.chain]))
                 ctx.derived[key] = got
     return got
-
-
-def _join_ranges(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
-    """The join of :func:`_join_chunks` as ranges: yields ``(lo, hi, first, count)``, the
-    receiver-side rows ``lo .. hi - 1`` of a chunk, and for every receiver-side row the
-    first transmitter-side row with its key and how many there are (0 without a match)."""
-    nu = len(src.unique_keys)
-    if nu == 0 or len(keys) == 0:
-        return
-    pos = np.minimum(np.searchsorted(src.unique_keys, keys), nu - 1)
-    match = src.unique_keys[pos] == keys
-    count = np.where(match, src.key_count[pos], 0)
-    first = np.where(match, src.key_start[pos], 0)
-    ends = np.cumsum(count)
-    total = int(ends[-1])
-    lo = 0
-    while lo < len(keys):
-        base = int(ends[lo] - count[lo])
-        if base >= total:
-            return
-        hi = max(int(np.searchsorted(ends, base + budget, side="right")), lo + 1)
-        yield lo, hi, first, count
-        lo = hi
-
-
-def _join_chunks(src, keys: np.ndarray, budget: int = CANDIDATE_BUDGET):
-    """For each receiver-side key, all transmitter-side sources with the same key, in chunks.
-
-    Yields ``(rows, src_rows)``: the receiver-side row and the transmitter-side row of every
-    match, at most about ``budget`` matches per chunk (a single key with more matches than
-    that comes in one chunk of its own), so that memory stays bounded however many image
-    sources share a (dihedron, sector).
-    """
-    for lo, hi, first, count in _join_ranges(src, keys, budget):
-        yield _join_pairs(lo, hi, first, count)
-
-
-def _join_pairs(lo: int, hi: int, first: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The (receiver-side row, transmitter-side row) pairs of one range of :func:`_join_ranges`."""
-    c = count[lo:hi]
-    rows = np.repeat(np.arange(lo, hi), c)
-    offs = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
-    return rows, np.repeat(first[lo:hi], c) + offs
-
-
-def _diffraction_prefilter(scene: "Scene", ctx: TxContext, rside: _EndSide, rows: np.ndarray, tside: _EndSide,
-                           src_rows: np.ndarray, rejected: np.ndarray):
-    """Steps 2-3 of :func:`diffraction_tile` on joined pairs (receiver side ``rside[rows]``,
-    transmitter side ``tside[src_rows]``): the closed-form point in the reduced coordinates
-    (seed §2.3), on the edge segment, not proven hidden from the transmitter side
-    (order 0: in a shadow proven from the transmitter, the first leg is blocked; order >= 1:
-    the leg to the last image cannot cross the last mirror), and without ``lit_region`` in
-    the shadow region. Returns the survivors' ``rows, src_rows, t``; adds the off-edge,
-    hidden and lit-region rejections to ``rejected`` (3,)."""
-    d = rside.dihedron[rows]
-    t = diffraction_point_reduced(tside.t[src_rows], tside.rho[src_rows], rside.t[rows], rside.rho[rows])
-    L = scene.dihedra.length[d]
-    on = (t >= 0) & (t <= L)
-    rejected[0] += int((~on).sum())
-    if tside.visible is not None:
-        seen = tside.visible.may_see(src_rows, t, L)
-        rejected[1] += int((on & ~seen).sum())
-        on &= seen
-    if not ctx.options.lit_region:
-        shadow = np.abs(rside.phi[rows] - tside.phi[src_rows]) > np.pi
-        rejected[2] += int((on & ~shadow).sum())
-        on &= shadow
-    return rows[on], src_rows[on], t[on]
-
-
-def _joined_candidates(scene: "Scene", ctx: TxContext, a: int, src, rside: _EndSide, tside: _EndSide,
-                       stats: Counter, tag: str):
-    """The join of the two sides on (dihedron, sector) (:func:`_join_chunks`), then
-    :func:`_diffraction_prefilter`, in chunks: yields the survivors' ``rows, src_rows, t``.
-
-    With the compiled kernels the two run as one loop over the join
-    (:func:`wavepaths.search._numba.joined_candidates`, the same expressions), which never
-    materialises the pairs that fail.
-    """
-    keys = rside.dihedron * ctx.key_stride + rside.sector
-    rejected = np.zeros(3, np.int64)
-    compiled = ctx.options.compiled and kernels.available()
-    if compiled:
-        from . import _numba
-
-        c = np.ascontiguousarray
-        vis = tside.visible
-        if vis is None:
-            z, zb = np.zeros(0), np.zeros(0, np.bool_)
-            vis_args = (False, z, z, zb, zb, 0.0)
-        else:
-            vis_args = (True, c(vis.lo), c(vis.hi), c(vis.open0), c(vis.open1), float(vis.tau))
-        r_args = (c(rside.t), c(rside.rho), c(rside.phi), c(rside.dihedron, dtype=np.int64))
-        s_args = (c(tside.t), c(tside.rho), c(tside.phi))
-        length = c(scene.dihedra.length)
-    for lo, hi, first, count in _join_ranges(src, keys):
-        m = int(count[lo:hi].sum())
-        stats[f"{tag}_candidates"] += m
-        if compiled:
-            out_r, out_s, out_t = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)
-            n = _numba.joined_candidates(lo, hi, c(first, dtype=np.int64), c(count, dtype=np.int64), *r_args, *s_args,
-                                         length, *vis_args, bool(ctx.options.lit_region), out_r, out_s, out_t,
-                                         rejected)
-            got = out_r[:n], out_s[:n], out_t[:n]
-        else:
-            rows, src_rows = _join_pairs(lo, hi, first, count)
-            got = _diffraction_prefilter(scene, ctx, rside, rows, tside, src_rows, rejected)
-        if len(got[0]):
-            yield got
-    stats[f"{tag}_rejected_off_edge"] += int(rejected[0])
-    if tside.visible is not None:
-        stats[f"{tag}_rejected_{'hidden' if a == 0 else 'aperture'}"] += int(rejected[1])
-    if not ctx.options.lit_region:
-        stats[f"{tag}_rejected_lit_region"] += int(rejected[2])
 
 
 LISTED_CHUNK_ROWS = 1 << 17
@@ -352,7 +176,7 @@ def diffraction_tile(
        two ends, ``t = (t_e d_r + t_r d_e) / (d_e + d_r)``, on the edge segment, not
        proven hidden from the transmitter side, in the shadow region without
        ``lit_region`` (steps 2 and 3 run as one compiled loop with numba:
-       :func:`_joined_candidates`);
+       :func:`~wavepaths.search.diffraction_join._joined_candidates`);
     4. the reflection points on both sides by the image method (back-traces);
     5. occlusion of every leg, cast in one batch.
     """
@@ -417,40 +241,6 @@ def diffraction_tile(
     return out
 
 
-UTD_BOUND_FLOOR = 1e-6
-"""``sin_beta_0_floor`` of :func:`~wavepaths.em.utd.utd_magnitude_bound` in the amplitude bounds
-(its default)."""
-
-
-def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.ndarray, n: np.ndarray,
-                                 te: np.ndarray, de: np.ndarray, tr: np.ndarray, dr: np.ndarray,
-                                 t: np.ndarray) -> np.ndarray:
-    """(k,) float64 [1/m]: an upper bound on ``|a| / (lambda / 4 pi)`` of diffracted candidates.
-
-    With passive reflections (``|Gamma| <= 1``) before and after the edge and unit antenna
-    patterns, a diffracted path's coefficient is at most
-    ``(lambda / 4 pi) |D| / sqrt(s s' (s + s'))`` (UTD, spherical incidence; ``s'``, ``s`` the
-    unfolded lengths before and after the edge, from the images' reduced coordinates:
-    ``s' = sqrt((t_e - t)^2 + d_e^2)``, ``s = sqrt((t_r - t)^2 + d_r^2)``), with ``|D|`` at most
-    :func:`~wavepaths.em.utd.utd_magnitude_bound` at the lowest frequency the fields will
-    use (``prune_frequency_hz``; the bound does not grow with frequency). The result carries
-    a 1 % margin for the rounding between the search's angles and the fields'.
-    """
-    from ..em.utd import utd_magnitude_bound
-    from ..fields.chain import SIN_BETA_0_FLOOR
-    from .paths import SPEED_OF_LIGHT
-
-    k = 2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT
-    s_in = np.sqrt((te - t) ** 2 + de * de)
-    s_out = np.sqrt((tr - t) ** 2 + dr * dr)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sin_b = np.maximum(de / s_in, SIN_BETA_0_FLOOR)
-        L = s_in * s_out / (s_in + s_out) * sin_b**2
-        amp = 1.01 * utd_magnitude_bound(phi, phi_prime, sin_b, n, k, L, sin_beta_0_floor=UTD_BOUND_FLOOR) / np.sqrt(
-            s_in * s_out * (s_in + s_out))
-    return np.where(np.isfinite(amp), amp, np.inf)
-
-
 @dataclass
 class PendingDiffraction:
     """Diffracted candidates that passed every test but occlusion, held back for the
@@ -464,7 +254,7 @@ class PendingDiffraction:
         Transmitter index and receiver index (tile-local, without the offset).
     amp : (k,) float64 [1/m]
         Upper bound on ``|a| / (lambda / 4 pi)`` with unit antenna patterns
-        (:func:`_diffraction_amplitude_bound`).
+        (:func:`~wavepaths.search.diffraction_bounds._diffraction_amplitude_bound`).
     rest : tuple
         What :func:`finish_diffraction` needs to cast and assemble them.
     """
@@ -484,8 +274,9 @@ def _diffraction_candidates(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazi
                             rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray, t: np.ndarray,
                             pending: list | None = None) -> list[PathBatch]:
     """Steps 4 and 5 of :func:`diffraction_tile` on the candidates that passed
-    :func:`_joined_candidates` (receiver side ``rside[rows]``, transmitter side
-    ``tside[src_rows]``, diffraction points at ``t`` [m along the edge])."""
+    :func:`~wavepaths.search.diffraction_join._joined_candidates` (receiver side
+    ``rside[rows]``, transmitter side ``tside[src_rows]``, diffraction points at ``t`` [m
+    along the edge])."""
     compiled = ctx.options.compiled and kernels.available()
     fn = _diffraction_candidates_compiled if compiled else _diffraction_candidates_numpy
     return fn(scene, ctx, a, b, rx, rx_lv, rx_offset, stats, grazing, tag, rside, rows, tside, src_rows, t, pending)
@@ -587,7 +378,7 @@ def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, sta
                                      rows: np.ndarray, tside: _EndSide, src_rows: np.ndarray, t: np.ndarray,
                                      pending: list | None = None) -> list[PathBatch]:
     """:func:`_diffraction_candidates` with the boundary flags, the points on the edges, both
-    back-traces and the vertices in :func:`wavepaths.search._numba.diffraction_vertices`
+    back-traces and the vertices in :func:`wavepaths.search._numba_diffraction.diffraction_vertices`
     (the same expressions, candidate by candidate)."""
     from . import _numba
 
