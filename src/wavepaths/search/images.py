@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import ImageTreeTooLarge, WavepathsError
 from ..scene.closed import points_inside_closed
+from .on_faces import points_on_surfaces
 from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree, vector_angle
 from .geometry import mirror_points, segment_plane_intersection
 
@@ -98,10 +99,17 @@ def reflecting_polygons(scene: "Scene", skip_absorbers: bool) -> np.ndarray:
 
 
 def source_inside_objects(scene: "Scene", sources: np.ndarray) -> np.ndarray:
-    """(s, objects) bool: which closed objects each source lies in (one-sided culling is off there)."""
+    """(s, objects) bool: which closed objects each source lies in (one-sided culling is off there).
+
+    A source exactly on a face of an object is on its surface, not inside it
+    (:func:`wavepaths.search.on_faces.points_on_surfaces`), whatever the ray-parity test says there.
+    """
     if not (scene.outward_sign != 0).any() or len(sources) == 0:
         return np.zeros((len(sources), len(scene.object_names)), dtype=bool)
-    return points_inside_closed(scene, sources)
+    inside = points_inside_closed(scene, sources)
+    if inside.any():
+        inside &= ~points_on_surfaces(scene, sources)
+    return inside
 
 
 PARENT_CHUNK = 1 << 15  # parent chains whose beams are queried together

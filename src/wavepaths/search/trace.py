@@ -29,6 +29,7 @@ from ..scene.model import Scene
 from . import kernels
 from .context import TxContext, build_tx_context
 from .launched import prepare_launched
+from .on_faces import points_on_faces, points_on_surfaces
 from .options import TraceOptions
 from .paths import Paths, assemble
 from .tile import trace_tile
@@ -40,7 +41,10 @@ MAX_COORDINATE = 1e9  # [m] positions beyond this lose the float64 precision the
 def check_positions(name: str, value, allow_empty: bool = False) -> np.ndarray:
     """Positions as a finite (k, 3) float64 array within +-``MAX_COORDINATE`` metres,
     or a :class:`WavepathsError` that says why."""
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise WavepathsError(f"`{name}` must be numbers of shape (n, 3) [m]: {exc}") from None
     if arr.ndim == 1 and arr.shape[0] == 3:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != 3:
@@ -82,7 +86,8 @@ def _warn_inside(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarr
         if len(pts) * tris > INSIDE_CHECK_BUDGET:
             continue
         inside = points_inside_closed(scene, pts)
-        inside[face >= 0] = False
+        if (face >= 0).any():  # on a face of an object is not inside it (the search's rule too)
+            inside &= ~points_on_surfaces(scene, pts)
         rows = np.nonzero(inside.any(axis=1))[0]
         if len(rows):
             objs = sorted({scene.object_names[o] for o in np.nonzero(inside[rows].any(axis=0))[0]})
@@ -92,34 +97,6 @@ def _warn_inside(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarr
                 WavepathsWarning,
                 stacklevel=3,
             )
-
-
-def points_on_faces(scene: Scene, points: np.ndarray, budget: int = INSIDE_CHECK_BUDGET) -> np.ndarray:
-    """(n,) int64: a polygon each point lies exactly on (within the casters' plane tolerance), or -1.
-
-    Such a point takes part in no reflection or diffraction on that polygon or its edges
-    (its side of the face is undefined, docs/search.md), so the field computed there is
-    the limit from neither side: :func:`trace` reports it. (points x polygons) distance
-    tests, chunked; skipped (all -1) beyond ``budget`` of them.
-    """
-    from ..raycast import plane_tolerance
-    from ..scene.polygon_query import points_in_polygons
-
-    n, p = len(points), scene.num_polygons
-    out = np.full(n, -1, dtype=np.int64)
-    if n == 0 or p == 0 or n * p > budget:
-        return out
-    tol = plane_tolerance(scene)
-    step = max(1, (1 << 22) // p)
-    for s in range(0, n, step):
-        pts = points[s : s + step]
-        dist = np.abs(pts @ scene.polygon_normal.T - scene.polygon_offset[None, :])
-        i, q = np.nonzero(dist <= tol)
-        if len(i) == 0:
-            continue
-        on = points_in_polygons(scene, pts[i], q)
-        out[s + i[on]] = q[on]
-    return out
 
 
 def _warn_on_faces(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarray | None = None,
