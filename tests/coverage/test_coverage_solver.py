@@ -18,7 +18,7 @@ def test_inside_mask_is_cached_per_scene_and_grid_and_bounded():
     scene = load_scene("street_canyon")
     opts = TraceOptions(max_reflections=0, diffraction=False)
     settings = CoverageOptions(workers=1)
-    grid = PlanarGrid(center=[0.0, 0.0], height=1.5, size=[60.0, 60.0], cell_size=4.0)
+    grid = PlanarGrid(center=[0.25, 0.25], height=1.5, size=[60.0, 60.0], cell_size=4.0)  # no centre on a wall
     first = coverage(scene, [[-60.0, 0.0, 10.0]], grid, opts, settings=settings)
     again = coverage(scene, [[-30.0, 0.0, 10.0]], grid, opts, settings=settings)
     fresh = inside_solid_objects(scene, grid.cell_centers().reshape(-1, 3)).reshape(first.inside.shape)
@@ -26,7 +26,8 @@ def test_inside_mask_is_cached_per_scene_and_grid_and_bounded():
     cache = scene.__dict__["_coverage_cache"]
     assert sum(k.startswith("inside:") for k in cache) == 1
     for i in range(INSIDE_CACHE_SIZE + 2):
-        g = PlanarGrid(center=[float(i), 0.0], height=1.5, size=[20.0, 20.0], cell_size=4.0)
+        # (a quarter metre off the integers: no cell centre on a wall, which would warn)
+        g = PlanarGrid(center=[float(i) + 0.25, 0.25], height=1.5, size=[20.0, 20.0], cell_size=4.0)
         m = coverage(scene, [[-60.0, 0.0, 10.0]], g, opts, settings=settings)
         assert np.array_equal(m.inside, inside_solid_objects(scene, g.cell_centers().reshape(-1, 3)).reshape(m.inside.shape))
     assert sum(k.startswith("inside:") for k in cache) == INSIDE_CACHE_SIZE

@@ -26,6 +26,7 @@ import dataclasses
 import os
 import sys
 import time
+import warnings
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable
@@ -34,7 +35,7 @@ import numpy as np
 
 from ..errors import WavepathsError
 from ..fields import FieldConfig, compute_fields
-from ..scene.model import Scene
+from ..scene.model import Scene, WavepathsWarning
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble, coincident_paths, path_order
@@ -367,13 +368,14 @@ INSIDE_CACHE_SIZE = 8
 
 def _cached(scene: "Scene", key: str, make):
     """A value cached on the scene object, like its dihedra: the solids, and the inside mask of
-    a set of cell centres (keyed by their bytes), which do not depend on the transmitters or the
-    options, so a second map on the same grid skips the ray-parity test. At most
-    :data:`INSIDE_CACHE_SIZE` masks are kept."""
+    a set of cell centres and the faces they lie on (keyed by their bytes), which do not depend
+    on the transmitters or the options, so a second map on the same grid skips the ray-parity
+    and on-face tests. At most :data:`INSIDE_CACHE_SIZE` of each are kept."""
     cache = scene.__dict__.setdefault("_coverage_cache", {})
     if key not in cache:
-        masks = [k for k in cache if k.startswith("inside:")]
-        if key.startswith("inside:") and len(masks) >= INSIDE_CACHE_SIZE:
+        kind = key.partition(":")[0] + ":"  # "inside:" masks, "onface:" faces: per grid, a few kept
+        masks = [k for k in cache if k.startswith(kind)]
+        if ":" in key and len(masks) >= INSIDE_CACHE_SIZE:
             del cache[masks[0]]
         value = make()
         if isinstance(value, np.ndarray):
@@ -470,13 +472,16 @@ def coverage(
             i = int(np.nonzero(tx_in)[0][0])
             raise WavepathsError(
                 f"transmitter {i} at {tx[i].tolist()} lies inside a solid object: move it, or set "
-                f"`CoverageOptions(mask_inside=False)` if the object is a room to cover from inside"
+                f"`CoverageOptions(mask_inside=False)` (`--keep-inside` on the command line) if the object is a "
+                f"room to cover from inside"
             )
     else:
         inside = np.zeros(len(flat), bool)
     timings["inside_s"] = time.perf_counter() - t
     active = np.nonzero(~inside)[0]
     _warn_on_faces(scene, tx, np.empty((0, 3)))  # as trace() does: such a transmitter is on no side of its face
+    faces = _cached(scene, "onface:" + hashlib.sha1(flat.tobytes()).hexdigest(), lambda: points_on_faces(scene, flat))
+    _warn_cells_on_faces(scene, flat, active, faces[active])
     _check_off_transmitters(scene, tx, flat, active, grid)
 
     t = time.perf_counter()
@@ -573,6 +578,22 @@ def _check_materials(scene: Scene, cfg: FieldConfig) -> None:
         material = scene.materials[i]
         if material.kind not in ("pec", "absorber"):
             relative_permittivity(material, cfg.frequency_hz)  # raises WavepathsError out of range
+
+
+def _warn_cells_on_faces(scene: Scene, flat: np.ndarray, active: np.ndarray, face: np.ndarray) -> None:
+    """Warn when traced cell centres lie exactly on a face (a grid whose centres fall on walls:
+    the street canyon's footprint grid at 2 m put whole columns on them). Their fields are the
+    limit from neither side of the face, and such receivers are slow to trace."""
+    on = np.nonzero(face >= 0)[0]  # face: points_on_faces of the active cells
+    if len(on):
+        i = int(active[on[0]])
+        warnings.warn(
+            f"{len(on)} of {len(active)} cell centres lie exactly on a face (first: cell {i} at "
+            f"{flat[i].tolist()}, object {scene.object_names[scene.polygon_object[face[on[0]]]]}): they take part "
+            "in no reflection or diffraction there and their fields are the limit from neither side; offset "
+            "the grid by a fraction of a cell (PlanarGrid's `center`, `--center` on the command line)",
+            WavepathsWarning, stacklevel=3,
+        )
 
 
 def _check_off_transmitters(scene: Scene, tx: np.ndarray, flat: np.ndarray, active: np.ndarray, grid: Grid) -> None:
