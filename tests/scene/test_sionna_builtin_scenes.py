@@ -44,3 +44,20 @@ def test_sionna_builtin_scene_loads_with_all_its_triangles(xml):
     assert scene.num_triangles + scene.dropped_degenerate == faces
     assert scene.num_polygons > 0 and np.isfinite(scene.bounds).all()
     assert len(scene.object_names) == len(list(iter_shape_files(xml)))
+
+
+@pytest.mark.skipif(not SCENES, reason="sionna-rt is not installed (pip install 'wavepaths[sionna]')")
+def test_sionna_scenes_load_by_name():
+    """`load_scene("simple_street_canyon")` (and `wavepaths info simple_street_canyon`) is that
+    scene's XML file, found without importing Sionna; an unknown name still says what exists."""
+    from wavepaths.errors import SceneError
+    from wavepaths.scene.loaders import sionna_scene_file
+
+    xml = [p for p in SCENES if os.path.basename(p) == "simple_street_canyon.xml"][0]
+    assert sionna_scene_file("simple_street_canyon") == xml
+    by_name, by_file = load_scene("simple_street_canyon"), load_scene(xml)
+    assert by_name.source == xml
+    assert np.array_equal(by_name.vertices[by_name.triangles], by_file.vertices[by_file.triangles])
+    assert sionna_scene_file("../simple_street_canyon") is None
+    with pytest.raises(SceneError, match="Sionna RT's scenes"):
+        load_scene("no_such_scene")

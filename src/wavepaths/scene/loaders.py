@@ -197,6 +197,25 @@ def _refuse_y_up(axis: str, source: str) -> None:
         )
 
 
+def sionna_scene_file(name: str) -> str | None:
+    """The Mitsuba XML file of Sionna RT's scene ``name`` (``simple_street_canyon``, ``etoile``,
+    ``munich``...) when sionna-rt is installed, else None. Found in the package's files
+    (``sionna/rt/scenes/<name>/<name>.xml``), without importing Sionna (no Dr.Jit start-up)."""
+    import importlib.util
+
+    if not name or os.sep in name or "/" in name or name.startswith("."):
+        return None
+    try:
+        spec = importlib.util.find_spec("sionna")
+    except (ImportError, ValueError):
+        return None
+    for root in (spec.submodule_search_locations or []) if spec else []:
+        path = os.path.join(root, "rt", "scenes", name, f"{name}.xml")
+        if os.path.isfile(path):
+            return path
+    return None
+
+
 def load_scene(
     source: str,
     *,
@@ -213,7 +232,9 @@ def load_scene(
     ----------
     source : str
         A built-in name (see :mod:`wavepaths.scene.builtin`), a Mitsuba XML file (as
-        Sionna RT reads them), or a mesh file trimesh reads (OBJ, PLY, STL, glTF/GLB, OFF).
+        Sionna RT reads them), the name of one of Sionna RT's scenes when sionna-rt is
+        installed (``simple_street_canyon``, ``etoile``, ``munich``: its XML file), or a
+        mesh file (OBJ, PLY, STL, glTF/GLB, OFF).
         OBJ faces of four or more vertices are split into triangles that cover exactly
         the face, concave faces included (ear clipping; trimesh alone fans them); a face
         that is not planar is split too, with a :class:`WavepathsWarning`. In XML files
@@ -262,8 +283,13 @@ def load_scene(
         arrays = builtin_arrays(source)
     else:
         if not os.path.exists(source):
-            names = ", ".join(BUILTIN_SCENES)
-            raise SceneError(f"{source}: no such file (and not a built-in scene: {names})")
+            sionna = sionna_scene_file(source)
+            if sionna is None:
+                names = ", ".join(BUILTIN_SCENES)
+                raise SceneError(f"{source}: no such file (and not a built-in scene: {names}; nor, with sionna-rt "
+                                 "installed, one of Sionna RT's scenes such as simple_street_canyon)")
+            return load_scene(sionna, material=material if given else None, tolerances=tolerances,
+                              up_axis=up_axis, materials=materials)
         ext = os.path.splitext(source)[1].lower()
         if ext == ".xml":
             _refuse_y_up(axis, source)
