@@ -102,6 +102,7 @@ def _trace_options(args):
         launch_fan=getattr(args, "launch_fan", 256),
         reflection_candidates=getattr(args, "reflection_candidates", "exhaustive"),
         launch_rays=getattr(args, "launch_rays", 1 << 21),
+        free_edges=not getattr(args, "no_free_edges", False),
     )
 
 
@@ -199,6 +200,9 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--diffraction-reflections", type=int, default=1,
                    help="reflections combined with the diffraction, before and after (default 1)")
     p.add_argument("--no-lit-region", action="store_true", help="diffraction only in the incident shadow")
+    p.add_argument("--no-free-edges", action="store_true",
+                   help="no diffraction on free edges (edges of one face: a screen's or a finite ground's border), "
+                        "as Sionna RT without edge_diffraction")
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
                    help="drop reflections at least this many dB below free space (bound in TraceOptions)")
@@ -248,8 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("paths", help="list the propagation paths between transmitters and receivers")
     add_scene_arguments(p)
-    p.add_argument("--tx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"))
-    p.add_argument("--rx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"))
+    p.add_argument("--tx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"),
+                   help="transmitter position [m]; repeat for several")
+    p.add_argument("--rx", nargs=3, type=float, action="append", required=True, metavar=("X", "Y", "Z"),
+                   help="receiver position [m]; repeat for several")
     _add_trace_flags(p)
     _add_field_flags(p)
     p.add_argument("--json", action="store_true", help="print JSON")

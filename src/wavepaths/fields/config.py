@@ -57,6 +57,8 @@ class FieldConfig:
     compiled: bool = True
 
     def __post_init__(self) -> None:
+        if isinstance(self.frequency_hz, bool) or not isinstance(self.frequency_hz, numbers.Real):
+            raise WavepathsError(f"`frequency_hz` must be a number [Hz], got {self.frequency_hz!r}")
         if not (self.frequency_hz > 0 and self.frequency_hz < 1e13):
             raise WavepathsError(f"`frequency_hz` must be in (0, 1e13) Hz, got {self.frequency_hz}")
         if self.model not in ("utd", "gtd"):

@@ -205,6 +205,10 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> T
     ]
     # a scene traced without diffraction never builds its dihedra
     diffracting = np.nonzero(scene.dihedra.diffracting)[0] if options.diffraction else np.zeros(0, np.int64)
+    if not options.free_edges and len(diffracting):
+        free = scene.dihedra.face_count[diffracting] == 1
+        stats["dihedra_skipped_free_edges"] = int(free.sum())
+        diffracting = diffracting[~free]
     stats["dihedra_diffracting"] = int(len(diffracting))
     sources: list[DiffractionSources] = []
     sectors = None

@@ -135,6 +135,12 @@ class TraceOptions:
         cast like the others; a mirror the rays miss is missed (one transmitter per context).
     launch_rays : int
         With ``reflection_candidates="launched"``: rays from the transmitter.
+    free_edges : bool
+        Diffract on free edges too: edges of one face (the border of a screen or of a
+        finite ground plane: a half-plane, ``n = 2``). Default ``True``: a free edge
+        diffracts. ``False`` leaves them out, as Sionna RT does unless its
+        ``edge_diffraction`` is on (for a like-for-like comparison, or a ground plane
+        whose border is only where the model stops).
     """
 
     los: bool = True
@@ -153,8 +159,15 @@ class TraceOptions:
     launch_fan: int = 256
     reflection_candidates: str = "exhaustive"
     launch_rays: int = 1 << 21
+    free_edges: bool = True
 
     def __post_init__(self) -> None:
+        import numbers
+
+        for name in ("max_reflections", "diffraction_reflections", "launch_rays", "launch_fan", "rx_batch"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise WavepathsError(f"`{name}` must be an integer, got {value!r}")
         object.__setattr__(self, "disable_culling", frozenset(self.disable_culling))
         unknown = self.disable_culling - set(CULLING_TESTS)
         if unknown:
