@@ -121,6 +121,13 @@ def _cmd_paths(args) -> int:
         # the incident fields make the field strength independent of the receive antenna
         result = compute_fields(scene, paths, field_cfg)
     records = paths.records()
+    objects = paths.objects(scene)
+    (zd, ad), (za, aa) = paths.angles_of_departure, paths.angles_of_arrival
+    for i, r in enumerate(records):
+        d = int(paths.depth[i])
+        r["objects"] = [scene.object_names[o] for o in objects[i, :d]]  # the object of each interaction
+        r["departure_deg"] = {"zenith": float(np.degrees(zd[i])), "azimuth": float(np.degrees(ad[i]))}
+        r["arrival_deg"] = {"zenith": float(np.degrees(za[i])), "azimuth": float(np.degrees(aa[i]))}
     if result is not None:
         a = result.a
         gain = result.gain_db
@@ -140,7 +147,8 @@ def _cmd_paths(args) -> int:
         header += f" {'gain [dB]':>10}"
     print(header)
     for r in records:
-        kinds = "-".join({"reflection": "R", "diffraction": "D"}[k] for k in r["interactions"]) or "LOS"
+        kinds = "-".join(f"{ {'reflection': 'R', 'diffraction': 'D'}[k]}({o})"
+                         for k, o in zip(r["interactions"], r["objects"])) or "LOS"
         line = f"{r['tx']:>3} {r['rx']:>3}  {kinds:<34} {r['length_m']:>11.4f} {r['delay_s'] * 1e9:>11.4f}"
         if "gain_db" in r:
             line += f" {r['gain_db']:>10.2f}"

@@ -142,6 +142,25 @@ def test_cli_antennas_per_side_and_their_orientation():
     assert gain("--antenna", "tr38901", "--rx-antenna", "iso", "--tx-orientation", 90, 0, 0) == pytest.approx(facing)
 
 
+def test_paths_json_names_the_objects_and_gives_the_angles():
+    """Each path of ``paths --json`` names the object of each interaction and carries its
+    departure and arrival angles [deg] (zenith from +z, azimuth from +x): a ground
+    reflection from (0, 0, 10) to (40, 0, 2) leaves at 90 + atan(10/(40 * 10/12)) deg and
+    arrives from below, mirror-wise."""
+    r = run_paths("street_canyon", "--tx", -60, 0.5, 10, "--rx", -20, 0.5, 2, "--max-reflections", 1,
+                  "--no-diffraction", "--json")
+    assert r.returncode == 0, r.stderr
+    paths = strict_json(r.stdout)["paths"]
+    los = [p for p in paths if not p["interactions"]][0]
+    ground = [p for p in paths if p["objects"] == ["ground"]][0]
+    assert los["objects"] == []
+    assert los["departure_deg"]["zenith"] == pytest.approx(90 + np.degrees(np.arctan2(8, 40)), abs=1e-9)
+    assert abs(los["arrival_deg"]["azimuth"]) == pytest.approx(180.0, abs=1e-9)  # from -x: +-180
+    dive = np.degrees(np.arctan2(10, 40 * 10 / 12))  # the reflection point divides 40 m as 10 : 2
+    assert ground["departure_deg"]["zenith"] == pytest.approx(90 + dive, abs=1e-9)
+    assert ground["arrival_deg"]["zenith"] == pytest.approx(90 + dive, abs=1e-9)
+
+
 # ---- strict JSON --------------------------------------------------------------------------
 def test_paths_json_is_strict_json_when_no_path_arrives():
     r = run_paths("half_plane", "--tx", -10, 5, -5, "--rx", 10, -5, -60, "--max-reflections", 0, "--no-diffraction",
