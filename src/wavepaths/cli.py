@@ -308,11 +308,27 @@ def _prepare_out(args) -> None:
         raise WavepathsError(f"--out {out!r} cannot be used as an output folder ({exc.strerror or exc})") from None
 
 
+def _first_run_notice(args) -> None:
+    """Say so on stderr when the compiled kernels have never been cached: the first search
+    then compiles them (about a minute here), which looks like a hang otherwise."""
+    if args.command not in ("paths", "coverage", "validate", "bench"):
+        return
+    import importlib.util
+
+    if importlib.util.find_spec("numba") is None:  # no numba: the numpy references, nothing to compile
+        return
+    cache = os.path.join(os.path.dirname(os.path.abspath(__file__)), "search", "__pycache__")
+    if not (os.path.isdir(cache) and any(f.endswith(".nbi") for f in os.listdir(cache))):
+        print("wavepaths: compiling the numba kernels on first use (about a minute, once; cached for later runs)",
+              file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         _prepare_out(args)
+        _first_run_notice(args)
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             return int(args.func(args) or 0)
