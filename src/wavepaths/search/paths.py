@@ -55,8 +55,9 @@ class Paths:
     stats : dict
         Per-stage counters: candidates considered, rejected by each test, rays cast.
 
-    The arrays are results, not to be changed in place: the derived ``segment_lengths`` and
-    ``lengths`` are computed once from ``vertices`` and kept.
+    The arrays are results, not to be changed in place: the derived ``segment_lengths``,
+    ``lengths`` and the departure and arrival directions are computed once from ``vertices``
+    and kept.
     """
 
     tx_positions: np.ndarray
@@ -107,7 +108,8 @@ class Paths:
 
     def __getstate__(self) -> dict:
         # the derived lengths are not pickled: recomputed, read-only, after unpickling
-        return {k: v for k, v in self.__dict__.items() if k not in ("_segment_lengths", "_lengths")}
+        return {k: v for k, v in self.__dict__.items()
+                if k not in ("_segment_lengths", "_lengths", "_departure", "_arrival")}
 
     @property
     def delays(self) -> np.ndarray:
@@ -116,16 +118,27 @@ class Paths:
 
     @property
     def departure_directions(self) -> np.ndarray:
-        """(N, 3) float64: unit vector leaving the transmitter."""
-        d = self.vertices[:, 1] - self.vertices[:, 0]
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        """(N, 3) float64: unit vector leaving the transmitter (computed once, read-only)."""
+        out = self.__dict__.get("_departure")
+        if out is None:
+            d = self.vertices[:, 1] - self.vertices[:, 0]
+            out = d / self.segment_lengths[:, :1]  # the first segment's length, as kept
+            out.flags.writeable = False
+            self.__dict__["_departure"] = out
+        return out
 
     @property
     def arrival_directions(self) -> np.ndarray:
-        """(N, 3) float64: unit propagation direction arriving at the receiver."""
-        rows = np.arange(len(self))
-        last = self.vertices[rows, self.depth + 1] - self.vertices[rows, self.depth]
-        return last / np.linalg.norm(last, axis=1, keepdims=True)
+        """(N, 3) float64: unit propagation direction arriving at the receiver (computed once,
+        read-only)."""
+        out = self.__dict__.get("_arrival")
+        if out is None:
+            rows = np.arange(len(self))
+            last = self.vertices[rows, self.depth + 1] - self.vertices[rows, self.depth]
+            out = last / self.segment_lengths[rows, self.depth][:, None]
+            out.flags.writeable = False
+            self.__dict__["_arrival"] = out
+        return out
 
     @staticmethod
     def _zenith_azimuth(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
