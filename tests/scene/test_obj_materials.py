@@ -107,3 +107,47 @@ def test_a_material_for_a_scene_with_its_own_materials_is_reported():
     with pytest.warns(WavepathsWarning, match="apply to mesh files"):
         scene = load_scene("street_canyon", material="glass")
     assert "glass" not in {m.name for m in scene.materials}
+
+
+# ---- found by a second reading of the reader ---------------------------------------------
+L_FACE = "f 3 4 5 6 1 2\n"  # an L of area 3 whose fan from its first vertex would leave it
+L_VERTS = [(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)]
+
+
+@pytest.mark.parametrize("style", ["tab", "indented", "negative", "continued_comment"])
+def test_concave_faces_are_split_from_the_vertices_the_reader_reads(tmp_path, style):
+    """The concave face is split where the reader resolves its vertices: vertex lines with a
+    tab or indented, negative references, a comment line ending in a backslash. (Before, a
+    second parser with its own rules chose the triangles: area 4 instead of 3, or a crash.)"""
+    sep = "\t" if style == "tab" else " "
+    lead = "  " if style == "indented" else ""
+    verts = "".join(f"{lead}v{sep}{x} {y} 0\n" for x, y in L_VERTS)
+    face = "f -4 -3 -2 -1 -6 -5\n" if style == "negative" else L_FACE
+    head = "# a note \\\n(its second line)\n" if style == "continued_comment" else ""
+    scene = load_scene(write(tmp_path, "l.obj", head + verts + face))
+    assert scene.areas.sum() == pytest.approx(3.0, rel=1e-12)
+    assert scene.num_triangles == 4
+
+
+def test_a_bad_face_after_a_split_face_names_the_files_line(tmp_path):
+    verts = "".join(f"v {x} {y} 0\n" for x, y in L_VERTS)
+    with pytest.raises(SceneError, match=r"line 8: face reference '9'"):
+        load_scene(write(tmp_path, "bad.obj", verts + L_FACE + "f 1 2 9\n"))
+
+
+def test_warnings_point_at_the_callers_line(tmp_path):
+    import warnings
+
+    path = write(tmp_path, "m.obj", GROUND + "usemtl Dirt\nf 1 2 3 4\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_scene(path)
+    assert [w.filename for w in caught] == [__file__]
+
+
+def test_spaced_material_names_are_matched():
+    from wavepaths.em.materials import material_by_name
+
+    for name in ("ITU Concrete", "itu_concrete", "Mat-ITU_Concrete", "concrete"):
+        assert material_by_name(name).name == "concrete"
+    assert material_by_name("Medium Dry Ground").name == "medium_dry_ground"

@@ -181,10 +181,9 @@ def material_by_name(name: str) -> Material | None:
     ``mat-itu_concrete``), in any case; names with spaces or dashes between words match
     their underscored form (``Medium Dry Ground``).
     """
-    key = name.strip().lower()
-    key = key[4:] if key.startswith("mat-") else key
-    key = key[4:] if key.startswith(("itu_", "itu-")) else key
-    key = "_".join(key.replace("-", " ").split())
+    key = "_".join(name.strip().lower().replace("-", " ").replace("_", " ").split())  # "ITU Concrete": itu_concrete
+    key = key[4:] if key.startswith("mat_") else key
+    key = key[4:] if key.startswith("itu_") else key
     if key == "pec":
         return PEC
     if key == "absorber":

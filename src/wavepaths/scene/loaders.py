@@ -14,8 +14,8 @@ Two corrections to what trimesh returns for plain mesh files (docs/scenes.md):
 
 from __future__ import annotations
 
-import io
 import os
+import re
 import warnings
 from collections.abc import Mapping
 from typing import Literal
@@ -27,9 +27,8 @@ from ..em.materials import PEC, Material, as_material, material_by_name
 from ..errors import SceneError, WavepathsError
 from .builtin import BUILTIN_SCENES, builtin_arrays
 from .mitsuba import read_mitsuba_xml
-from .model import Scene, WavepathsWarning, build_scene
+from .model import Scene, WavepathsWarning, build_scene, external_stacklevel
 from .obj_reader import read_obj
-from .obj_faces import fixed_obj_text, read_obj_text
 from .tolerances import SceneTolerances
 
 MESH_FORMATS = (".obj", ".ply", ".stl", ".gltf", ".glb", ".off")
@@ -45,16 +44,6 @@ UpAxis = Literal["auto", "y", "z"]
 # ----------------------------------------------------------------------------- mesh files
 
 
-def _trimesh_load(path: str, tolerances: SceneTolerances):
-    """``trimesh.load(path, process=False)``, with the concave faces of an OBJ file fixed."""
-    if os.path.splitext(path)[1].lower() == ".obj":
-        fixed = fixed_obj_text(read_obj_text(path), path, tolerances)
-        if fixed is not None:
-            resolver = trimesh.resolvers.FilePathResolver(os.path.abspath(path))  # finds the .mtl as before
-            return trimesh.load(io.StringIO(fixed), file_type="obj", resolver=resolver, process=False)
-    return trimesh.load(path, process=False)
-
-
 
 
 def _trimesh_parts(loaded, path: str) -> list[tuple[str, trimesh.Trimesh]]:
@@ -64,6 +53,7 @@ def _trimesh_parts(loaded, path: str) -> list[tuple[str, trimesh.Trimesh]]:
     if not isinstance(loaded, trimesh.Scene):
         raise SceneError(f"{path}: the mesh has no faces (no triangle mesh found)")
     parts = []
+    seen: dict[str, int] = {}
     for node in loaded.graph.nodes_geometry:
         transform, geom_name = loaded.graph[node]
         geom = loaded.geometry[geom_name]
@@ -71,7 +61,12 @@ def _trimesh_parts(loaded, path: str) -> list[tuple[str, trimesh.Trimesh]]:
             continue
         g = geom.copy()
         g.apply_transform(transform)
-        parts.append((str(node), g))
+        # trimesh names the nodes it makes for a mesh's primitives with a random hex suffix
+        # ("house_1_ae99c6"): without it, and numbered in order where names repeat, object
+        # names are the same from run to run
+        name = re.sub(r"_[0-9a-f]{6}$", "", str(node))
+        seen[name] = seen.get(name, 0) + 1
+        parts.append((name if seen[name] == 1 else f"{name}_{seen[name]}", g))
     return parts
 
 
@@ -109,7 +104,7 @@ def _warn_unknown_materials(path: str, unknown: list[str], default: Material) ->
             f"{path}: material name(s) {', '.join(repr(n) for n in unknown[:8])}{' ...' if len(unknown) > 8 else ''} "
             f"are no ITU-R P.2040 name, 'pec' or 'absorber': their triangles get the default material "
             f"{default.name!r}; map them with load_scene(..., materials={{name: material}})",
-            WavepathsWarning, stacklevel=4,
+            WavepathsWarning, stacklevel=external_stacklevel(),
         )
 
 
@@ -151,7 +146,7 @@ def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances |
             v = v @ Y_UP_TO_Z_UP.T
         return v, t, o, m, names, table
     try:
-        loaded = _trimesh_load(path, tolerances or SceneTolerances())
+        loaded = trimesh.load(path, process=False)  # (OBJ files are read by obj_reader)
     except Exception as exc:
         raise SceneError(f"{path}: cannot read mesh ({exc})") from None
     parts = _trimesh_parts(loaded, path)
@@ -277,7 +272,7 @@ def load_scene(
         raise WavepathsError(f"load_scene: `materials` must be a mapping of names to materials, got {type(materials).__name__}")
     if (given or materials) and (source in BUILTIN_SCENES or source.lower().endswith(".xml")):
         warnings.warn(f"{source}: `material` and `materials` apply to mesh files; this scene's materials are its own",
-                      WavepathsWarning, stacklevel=2)
+                      WavepathsWarning, stacklevel=external_stacklevel())
     if source in BUILTIN_SCENES:
         _refuse_y_up(axis, source)
         arrays = builtin_arrays(source)

@@ -30,6 +30,20 @@ class WavepathsWarning(UserWarning):
     """Something was dropped or adjusted, and the user should know (counted in the text)."""
 
 
+def external_stacklevel() -> int:
+    """The ``stacklevel`` that makes a warning raised by the caller of this function point at
+    the first frame outside the ``wavepaths`` package (the user's call), however deep the
+    loaders nest (a Sionna scene loaded by name adds a level)."""
+    import os
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # .../wavepaths
+    frame, level = sys._getframe(1), 1  # the function that warns: level 1 for warnings.warn
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(root + os.sep):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 @dataclass(frozen=True, eq=False)
 class Scene:
     """A polygonal scene.

@@ -2,9 +2,8 @@
 
 trimesh (and Mitsuba 3, ``src/shapes/obj.cpp``) split every OBJ face into a fan from its
 first vertex, which covers area outside a concave face (an L-shaped roof gains the square
-that closes the L). :func:`fixed_obj_text` rewrites the faces whose fan would leave them,
-or that are not planar, as triangles from :func:`triangulate_polygon` (ear clipping in the
-face's plane), with warnings for bent and self-intersecting faces;
+that closes the L). :func:`triangulate_polygon` splits a face by ear clipping in its plane
+(:mod:`wavepaths.scene.obj_reader` uses it where the fan would leave the face);
 :func:`concave_obj_faces` lists the concave faces for the XML reader, which keeps the fans
 as Mitsuba does (docs/scenes.md).
 """
@@ -12,14 +11,12 @@ as Mitsuba does (docs/scenes.md).
 from __future__ import annotations
 
 import re
-import warnings
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
-from .model import WavepathsWarning
 from .tolerances import SceneTolerances
 
 
@@ -338,74 +335,6 @@ def _obj_faces(text: str, eps_of: float) -> tuple[list[_ObjFaces], float] | None
             out.append(_ObjFaces(np.array(starts)[keep], np.array(ends)[keep],
                                  polygon_planes(points[keep], eps_of * diagonal)))
     return out, diagonal
-
-
-def fixed_obj_text(text: str, path: str, tolerances: SceneTolerances) -> str | None:
-    """The OBJ text with every face whose fan would leave it replaced by its ear-clipping
-    triangles (same vertex references, same place in the file, so objects, groups and
-    materials are read as before), or None when trimesh's fans are all right.
-
-    Warns (:class:`WavepathsWarning`) about faces that are not planar within
-    ``tolerances.plane_distance`` of the file's diagonal and faces that are not simple.
-    """
-    found = _obj_faces(text, tolerances.weld)
-    if found is None:
-        return None
-    batches, diagonal = found
-    eps, flat = tolerances.weld * diagonal, tolerances.plane_distance * diagonal
-    fixes: list[tuple[int, int, str]] = []
-    bent: list[tuple[float, int, int]] = []  # (distance from the plane, start, end)
-    tangled: list[tuple[int, int]] = []
-    for b in batches:
-        valid = b.planes.valid
-        for i in np.flatnonzero(valid & (b.planes.deviation > flat)):
-            bent.append((float(b.planes.deviation[i]), int(b.start[i]), int(b.end[i])))
-        for i in np.flatnonzero(valid & ~fan_is_valid(b.planes.uv, eps)):
-            start, end = int(b.start[i]), int(b.end[i])
-            tris, clean = triangulate_polygon(b.planes.uv[i], eps)
-            refs = _refs(text[start:end])
-            fixes.append((start, end, "\n".join("f " + " ".join(refs[j] for j in t) for t in tris)))
-            if not clean:
-                tangled.append((start, end))
-    _warn_bent(text, path, bent, flat)
-    _warn_tangled(text, path, tangled)
-    return _replaced(text, fixes) if fixes else None
-
-
-def _replaced(text: str, fixes: list[tuple[int, int, str]]) -> str:
-    """``text`` with the spans ``(start, end)`` replaced (spans do not overlap)."""
-    pieces, last = [], 0
-    for start, end, new in sorted(fixes):
-        pieces += [text[last:start], new]
-        last = end
-    return "".join(pieces) + text[last:]
-
-
-def _where(text: str, start: int, end: int) -> str:
-    """``line 12: 'f 1 2 3 4 5 6'``: a face, for messages."""
-    return f"line {_line_numbers(text, np.array([start]))[0]}: '{_statement(text, start, end)}'"
-
-
-def _warn_bent(text: str, path: str, bent: list[tuple[float, int, int]], flat: float) -> None:
-    if not bent:
-        return
-    dev, start, end = max(bent)
-    warnings.warn(
-        f"{path}: {len(bent)} face(s) of four or more vertices are not planar (up to {dev:.3g} m from their "
-        f"mean plane, more than {flat:.3g} m, at {_where(text, start, end)}); wavepaths splits each into "
-        "triangles (a fan from its first vertex, or ear clipping in its mean plane when the fan would leave "
-        "the face), one of several surfaces these vertices bound: split such faces in the file",
-        WavepathsWarning, stacklevel=6,
-    )
-
-
-def _warn_tangled(text: str, path: str, tangled: list[tuple[int, int]]) -> None:
-    if tangled:
-        warnings.warn(
-            f"{path}: {len(tangled)} face(s) are not simple polygons (edges crossing, e.g. "
-            f"{_where(text, *tangled[0])}); their triangles cover another region than intended",
-            WavepathsWarning, stacklevel=6,
-        )
 
 
 def read_obj_text(path: str) -> str:

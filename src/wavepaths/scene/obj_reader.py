@@ -10,8 +10,11 @@ each with its ``usemtl``, came out as ``ground`` with the box's 12 triangles and
   object named after the file. Statements with the same name are one object;
 * each face carries the name of the last ``usemtl`` before it (or none);
 * a face of four or more vertices becomes a fan from its first vertex, as trimesh and
-  Mitsuba 3 make it, unless :func:`wavepaths.scene.obj_faces.fixed_obj_text` replaced it
-  by its ear-clipping triangles first (a concave or bent face);
+  Mitsuba 3 make it, unless the fan would leave it (a concave face) or have a flat
+  triangle: it is then split by ear clipping in its plane
+  (:func:`wavepaths.scene.obj_faces.triangulate_polygon`). Faces farther than
+  ``plane_distance`` (of the file's diagonal) from their mean plane, and faces that are not
+  simple polygons, are named in a warning (their line and statement);
 * vertex references follow the OBJ specification: ``v/vt/vn`` uses ``v``; a negative
   index counts back from the last vertex read so far.
 
@@ -21,12 +24,14 @@ Only the vertices the faces use are kept.
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import SceneError
-from .obj_faces import fixed_obj_text, read_obj_text
+from .model import WavepathsWarning, external_stacklevel
+from .obj_faces import fan_is_valid, polygon_planes, read_obj_text, triangulate_polygon
 from .tolerances import SceneTolerances
 
 
@@ -86,6 +91,61 @@ def _statements(lines: list[str]):
         carry, first = "", 0
 
 
+def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: list[int], statements: list[str],
+                 tolerances: SceneTolerances) -> list[np.ndarray]:
+    """Triangles ``(t_i, 3)`` of vertex indices for each face (see the module docstring)."""
+    out: list[np.ndarray] = [np.zeros((0, 3), np.int64)] * len(faces)
+    by_count: dict[int, list[int]] = {}
+    for f, refs in enumerate(faces):
+        if len(refs) == 3:
+            out[f] = np.asarray([refs], np.int64)
+        else:
+            by_count.setdefault(len(refs), []).append(f)
+    if not by_count:
+        return out
+    used = np.unique(np.concatenate([np.asarray(faces[f]) for fs in by_count.values() for f in fs]))
+    lo, hi = verts[used].min(axis=0), verts[used].max(axis=0)
+    diagonal = float(np.linalg.norm(hi - lo)) if np.isfinite(hi - lo).all() else 0.0
+    eps, flat = tolerances.weld * diagonal, tolerances.plane_distance * diagonal
+    bent: list[tuple[float, int]] = []
+    tangled: list[int] = []
+    for k, fs in by_count.items():
+        index = np.asarray([faces[f] for f in fs], np.int64)  # (m, k)
+        fan = np.stack([index[:, :1].repeat(k - 2, axis=1), index[:, 1:-1], index[:, 2:]], axis=2)
+        points = verts[index]
+        finite = np.isfinite(points).all(axis=(1, 2))
+        planes = polygon_planes(np.where(finite[:, None, None], points, 0.0), eps)
+        valid = planes.valid & finite
+        good = ~valid | fan_is_valid(planes.uv, eps)  # no area: the fan (the scene drops flat triangles)
+        for r, f in enumerate(fs):
+            if valid[r] and planes.deviation[r] > flat:
+                bent.append((float(planes.deviation[r]), f))
+            if good[r]:
+                out[f] = fan[r]
+                continue
+            tris, clean = triangulate_polygon(planes.uv[r], eps)
+            out[f] = index[r][tris]
+            if not clean:
+                tangled.append(f)
+    if bent:
+        dev, f = max(bent)
+        warnings.warn(
+            f"{path}: {len(bent)} face(s) of four or more vertices are not planar (up to {dev:.3g} m from their "
+            f"mean plane, more than {flat:.3g} m, at line {lines[f]}: {statements[f][:60]!r}); wavepaths splits "
+            "each into triangles (a fan from its first vertex, or ear clipping in its mean plane when the fan "
+            "would leave the face), one of several surfaces these vertices bound: split such faces in the file",
+            WavepathsWarning, stacklevel=external_stacklevel(),
+        )
+    if tangled:
+        f = tangled[0]
+        warnings.warn(
+            f"{path}: {len(tangled)} face(s) are not simple polygons (edges crossing, e.g. line {lines[f]}: "
+            f"{statements[f][:60]!r}); their triangles cover another region than intended",
+            WavepathsWarning, stacklevel=external_stacklevel(),
+        )
+    return out
+
+
 def read_obj(path: str, tolerances: SceneTolerances | None = None) -> ObjMesh:
     """The triangles, objects and material names of the OBJ file ``path``.
 
@@ -95,9 +155,7 @@ def read_obj(path: str, tolerances: SceneTolerances | None = None) -> ObjMesh:
         A malformed vertex or face (its line named), or a file without faces.
     """
     text = read_obj_text(path)
-    fixed = fixed_obj_text(text, path, tolerances or SceneTolerances())
-    # a fixed face's triangles take several lines: line numbers then count the rewritten text's
-    numbered = list(_statements((fixed if fixed is not None else text).split("\n")))
+    numbered = list(_statements(text.split("\n")))
     has_o = any(s == "o" or s.startswith(("o ", "o\t")) for _, s in numbered)
     label = "o" if has_o else "g"
     stem = os.path.splitext(os.path.basename(path))[0]
@@ -106,9 +164,11 @@ def read_obj(path: str, tolerances: SceneTolerances | None = None) -> ObjMesh:
     materials: dict[str, int] = {}
     current_object = stem
     current_material = -1
-    tris: list[tuple[int, int, int]] = []
-    tri_object: list[int] = []
-    tri_material: list[int] = []
+    faces: list[list[int]] = []
+    face_object: list[int] = []
+    face_material: list[int] = []
+    face_line: list[int] = []
+    face_text: list[str] = []
     for number, s in numbered:
         key, _, rest = s.replace("\t", " ").partition(" ")
         if key == "v":
@@ -121,20 +181,23 @@ def read_obj(path: str, tolerances: SceneTolerances | None = None) -> ObjMesh:
             refs = [_index(t, len(verts), path, number) for t in rest.split()]
             if len(refs) < 3:
                 raise SceneError(f"{path}, line {number}: a face needs at least 3 vertices, got {s!r}")
-            obj = objects.setdefault(current_object, len(objects))
-            for k in range(1, len(refs) - 1):  # a fan from the first vertex (trimesh's, Mitsuba's)
-                tris.append((refs[0], refs[k], refs[k + 1]))
-                tri_object.append(obj)
-                tri_material.append(current_material)
+            faces.append(refs)
+            face_object.append(objects.setdefault(current_object, len(objects)))
+            face_material.append(current_material)
+            face_line.append(number)
+            face_text.append(s)
         elif key == label:
             current_object = rest.strip() or stem
         elif key == "usemtl":
             name = rest.strip()
             current_material = materials.setdefault(name, len(materials)) if name else -1
-    if not tris:
+    if not faces:
         raise SceneError(f"{path}: the mesh has no faces")
-    t = np.asarray(tris, dtype=np.int64)
+    vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
+    split = _split_faces(path, vertices, faces, face_line, face_text, tolerances or SceneTolerances())
+    counts = np.array([len(t) for t in split])
+    t = np.concatenate(split)
     used, inverse = np.unique(t, return_inverse=True)
-    v = np.asarray(verts, dtype=np.float64)[used]
-    return ObjMesh(v, inverse.reshape(-1, 3).astype(np.int64), np.asarray(tri_object, np.int64),
-                   tuple(objects), np.asarray(tri_material, np.int64), tuple(materials))
+    return ObjMesh(vertices[used], inverse.reshape(-1, 3).astype(np.int64),
+                   np.repeat(np.asarray(face_object, np.int64), counts), tuple(objects),
+                   np.repeat(np.asarray(face_material, np.int64), counts), tuple(materials))
