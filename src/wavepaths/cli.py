@@ -209,8 +209,8 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
                    help="reflections combined with the diffraction, before and after (default 1)")
     p.add_argument("--no-lit-region", action="store_true", help="diffraction only in the incident shadow")
     p.add_argument("--no-free-edges", action="store_true",
-                   help="no diffraction on free edges (edges of one face: a screen's or a finite ground's border), "
-                        "as Sionna RT without edge_diffraction")
+                   help="no diffraction on free edges (edges of one face: a screen's or a finite ground's border; "
+                        "Sionna RT without edge_diffraction also skips edges whose other faces are other objects')")
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
                    help="drop reflections at least this many dB below free space (bound in TraceOptions)")
@@ -317,8 +317,16 @@ def _first_run_notice(args) -> None:
 
     if importlib.util.find_spec("numba") is None:  # no numba: the numpy references, nothing to compile
         return
+    # numba caches beside the sources, or under NUMBA_CACHE_DIR when set (its own tree)
+    custom = os.environ.get("NUMBA_CACHE_DIR")
     cache = os.path.join(os.path.dirname(os.path.abspath(__file__)), "search", "__pycache__")
-    if not (os.path.isdir(cache) and any(f.endswith(".nbi") for f in os.listdir(cache))):
+    if custom:
+        import glob
+
+        warm = bool(glob.glob(os.path.join(custom, "**", "*_numba*.nbi"), recursive=True))
+    else:
+        warm = os.path.isdir(cache) and any(f.endswith(".nbi") for f in os.listdir(cache))
+    if not warm:
         print("wavepaths: compiling the numba kernels on first use (about a minute, once; cached for later runs)",
               file=sys.stderr)
 

@@ -67,7 +67,7 @@ def _grid(args, scene):
             raise WavepathsError("--mesh replaces the planar grid: leave out --height, --cell, --size and --center")
         if not os.path.exists(args.mesh):
             raise WavepathsError(f"{args.mesh}: no such measurement mesh")
-        return MeshGrid.from_file(args.mesh)
+        return MeshGrid.from_file(args.mesh, up_axis=getattr(args, "up_axis", "auto"))  # turned as the scene is
     missing = [f for f, v in (("--height", args.height), ("--cell", args.cell)) if v is None]
     if missing:
         raise WavepathsError(f"a planar grid needs {' and '.join(missing)} (or give --mesh FILE)")

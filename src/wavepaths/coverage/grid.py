@@ -211,17 +211,37 @@ class MeshGrid:
         object.__setattr__(self, "offset", float(self.offset))
 
     @classmethod
-    def from_file(cls, path: str, offset: float = 0.0) -> "MeshGrid":
-        """A measurement mesh from any file trimesh reads (OBJ, PLY, STL, glTF)."""
+    def from_file(cls, path: str, offset: float = 0.0, up_axis: str = "auto") -> "MeshGrid":
+        """A measurement mesh from a mesh file (OBJ, PLY, STL, glTF/GLB, OFF), read and turned
+        to +Z up as :func:`wavepaths.scene.load_scene` reads a scene (``up_axis``: glTF is
+        +Y up; OBJ faces split exactly), so that it lies where the scene does."""
+        import os
+
         import trimesh
 
+        from ..errors import SceneError
+        from ..scene.loaders import Y_UP_TO_Z_UP, _check_up_axis, _rotates_to_z_up
+
+        axis = _check_up_axis(up_axis)
+        ext = os.path.splitext(path)[1].lower()
         try:
-            mesh = trimesh.load(path, process=False, force="mesh")
+            if ext == ".obj":
+                from ..scene.obj_reader import read_obj
+
+                obj = read_obj(path)
+                vertices, faces = obj.vertices, obj.triangles
+            else:
+                mesh = trimesh.load(path, process=False, force="mesh")
+                vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(getattr(mesh, "faces", []))
+        except SceneError as exc:
+            raise WavepathsError(f"cannot read the measurement mesh: {exc}") from None
         except Exception as exc:  # trimesh raises many kinds
             raise WavepathsError(f"{path}: cannot read the measurement mesh ({exc})") from None
-        if not hasattr(mesh, "faces") or len(mesh.faces) == 0:
+        if len(faces) == 0:
             raise WavepathsError(f"{path}: the measurement mesh has no faces")
-        return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces), offset)
+        if _rotates_to_z_up(ext, axis):
+            vertices = vertices @ Y_UP_TO_Z_UP.T
+        return cls(vertices, np.asarray(faces, np.int64).reshape(-1, 3), offset)
 
     @property
     def shape(self) -> tuple[int]:

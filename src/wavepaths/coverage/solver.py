@@ -462,10 +462,15 @@ def coverage(
 
     timings: dict[str, float] = {}
     t = time.perf_counter()
+    grid_key = hashlib.sha1(flat.tobytes()).hexdigest()
+    # the faces cell centres lie on, and whether on a solid's surface (cached per grid)
+    faces, on_solid = _cached(scene, "onface:" + grid_key, lambda: _cells_on_faces(scene, flat))
     if cov.mask_inside:
         solids = _cached(scene, "solids", lambda: solid_objects(scene))
-        inside = _cached(scene, "inside:" + hashlib.sha1(flat.tobytes()).hexdigest(),
-                         lambda: inside_solid_objects(scene, flat, solids))
+        inside = _cached(scene, "inside:" + grid_key, lambda: inside_solid_objects(scene, flat, solids))
+        # a centre on a solid's surface is masked like those inside it, whatever the ray-parity
+        # test (either answer on a surface) says: a rule, not a coin flip
+        inside = inside | on_solid
         tx_in = inside_solid_objects(scene, tx, solids)
         tx_in &= points_on_faces(scene, tx) < 0  # on a face the parity rule answers either way: warned below
         if tx_in.any():
@@ -480,8 +485,7 @@ def coverage(
     timings["inside_s"] = time.perf_counter() - t
     active = np.nonzero(~inside)[0]
     _warn_on_faces(scene, tx, np.empty((0, 3)))  # as trace() does: such a transmitter is on no side of its face
-    faces = _cached(scene, "onface:" + hashlib.sha1(flat.tobytes()).hexdigest(), lambda: points_on_faces(scene, flat))
-    _warn_cells_on_faces(scene, flat, active, faces[active])
+    _warn_cells_on_faces(scene, flat, active, faces[active], int((on_solid & inside).sum()))
     _check_off_transmitters(scene, tx, flat, active, grid)
 
     t = time.perf_counter()
@@ -580,18 +584,36 @@ def _check_materials(scene: Scene, cfg: FieldConfig) -> None:
             relative_permittivity(material, cfg.frequency_hz)  # raises WavepathsError out of range
 
 
-def _warn_cells_on_faces(scene: Scene, flat: np.ndarray, active: np.ndarray, face: np.ndarray) -> None:
-    """Warn when traced cell centres lie exactly on a face (a grid whose centres fall on walls:
-    the street canyon's footprint grid at 2 m put whole columns on them). Their fields are the
-    limit from neither side of the face, and such receivers are slow to trace."""
+def _cells_on_faces(scene: Scene, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(faces, on_solid)`` of cell centres ``flat``: a polygon each lies exactly on (-1: none,
+    :func:`~wavepaths.search.on_faces.points_on_faces`) and whether it lies on a face of a
+    solid object. Skipped (none on a face) beyond the on-face test's budget of point x polygon tests."""
+    from ..scene.closed import solid_objects_mask
+    from ..search.on_faces import points_on_surfaces
+
+    faces = points_on_faces(scene, flat)
+    on_solid = np.zeros(len(flat), bool)
+    if (faces >= 0).any():
+        rows = np.nonzero(faces >= 0)[0]
+        on_solid[rows] = points_on_surfaces(scene, flat[rows])[:, solid_objects_mask(scene)].any(axis=1)
+    return faces, on_solid
+
+
+def _warn_cells_on_faces(scene: Scene, flat: np.ndarray, active: np.ndarray, face: np.ndarray,
+                         masked: int = 0) -> None:
+    """Warn when cell centres lie exactly on a face (a grid whose centres fall on walls: the
+    street canyon's footprint grid at 2 m put whole columns on them). Those on a solid's
+    surface (``masked`` of them) are masked like the cells inside it; the others (a ground, a
+    screen) are traced, with fields that are the limit from neither side of the face."""
     on = np.nonzero(face >= 0)[0]  # face: points_on_faces of the active cells
-    if len(on):
-        i = int(active[on[0]])
+    if len(on) or masked:
+        first = (f" (first traced: cell {int(active[on[0]])} at {flat[active[on[0]]].tolist()}, object "
+                 f"{scene.object_names[scene.polygon_object[face[on[0]]]]})") if len(on) else ""
         warnings.warn(
-            f"{len(on)} of {len(active)} cell centres lie exactly on a face (first: cell {i} at "
-            f"{flat[i].tolist()}, object {scene.object_names[scene.polygon_object[face[on[0]]]]}): they take part "
-            "in no reflection or diffraction there and their fields are the limit from neither side; offset "
-            "the grid by a fraction of a cell (PlanarGrid's `center`, `--center` on the command line)",
+            f"{len(on) + masked} cell centres lie exactly on a face: {masked} on the surface of a solid object, "
+            f"masked like the cells inside it; {len(on)} traced{first}, taking part in no reflection or "
+            "diffraction on that face, their fields the limit from neither side; offset the grid by a fraction "
+            "of a cell or change its height (PlanarGrid's `center` and `height`, --center and --height)",
             WavepathsWarning, stacklevel=3,
         )
 

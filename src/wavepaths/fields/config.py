@@ -88,7 +88,10 @@ class FieldConfig:
 
         def antenna(side: str) -> Antenna:
             pattern = getattr(args, f"{side}_antenna", None) or getattr(args, "antenna", "iso")
-            yaw, pitch, roll = (math.radians(float(a)) for a in (getattr(args, f"{side}_orientation", None) or (0, 0, 0)))
+            degrees = [float(a) for a in (getattr(args, f"{side}_orientation", None) or (0, 0, 0))]
+            if not all(math.isfinite(a) for a in degrees):
+                raise WavepathsError(f"--{side}-orientation must be three finite angles [deg], got {degrees}")
+            yaw, pitch, roll = (math.radians(a) for a in degrees)
             return Antenna(pattern=pattern, polarization=getattr(args, "polarization", "V"),
                            orientation=(yaw, pitch, roll))
 

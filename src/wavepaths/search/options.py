@@ -138,9 +138,11 @@ class TraceOptions:
     free_edges : bool
         Diffract on free edges too: edges of one face (the border of a screen or of a
         finite ground plane: a half-plane, ``n = 2``). Default ``True``: a free edge
-        diffracts. ``False`` leaves them out, as Sionna RT does unless its
-        ``edge_diffraction`` is on (for a like-for-like comparison, or a ground plane
-        whose border is only where the model stops).
+        diffracts. ``False`` leaves them out (a ground plane whose border is only where the
+        model stops). Sionna RT without ``edge_diffraction`` leaves out more: it counts an
+        edge as free when no other face *of the same object* meets it, while wavepaths
+        joins the faces of every object along an edge into one dihedron (an awning's edge
+        along a wall is a wedge here, a free edge there; docs/search.md).
     """
 
     los: bool = True
