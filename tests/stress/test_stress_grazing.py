@@ -314,3 +314,26 @@ def test_receivers_on_a_rotated_wall_get_no_path_through_a_shelf(off_wall):
             t_wall = -p[:, 0] / (q[:, 0] - p[:, 0])
             assert np.all((1 - t_wall) * np.linalg.norm(q - p, axis=1) <= 1e-6)
     assert through_shelf == 0
+
+
+@pytest.mark.parametrize("scene_name, a, b", [
+    ("three_face_edge", [4.0, 3.0, 3.0], [2.0, 1.0, 4.0]),  # the block's x = 4 wall to its roof
+    ("street_canyon", [0.0, 10.0, 5.0], [20.0, 25.0, 10.0]),  # a street wall to the same building's back
+    ("box_on_ground", [0.0, 0.0, 10.0], [0.0, 12.0, 1.0]),  # the box's roof, a ground reflection at its foot
+])
+def test_no_leg_runs_through_the_solid_an_end_lies_on(scene_name, a, b):
+    """An end point on a solid's face: the occlusion rule lets a segment from it pass (its
+    end is on a surface), so a leg through the solid crossed no face and was kept (a line of
+    sight through a block). No leg of any path enters a solid (an independent test: the
+    midpoint of every leg is outside every solid), both ways round."""
+    from wavepaths.coverage import inside_solid_objects, solid_objects
+
+    s = load_scene(scene_name)
+    solids = solid_objects(s)
+    for tx, rx in ((a, b), (b, a)):
+        with pytest.warns(WavepathsWarning, match=ON_FACE_MESSAGE):
+            p = trace(s, np.array([tx]), np.array([rx]), TraceOptions(max_reflections=2, diffraction_reflections=1))
+        for i in range(len(p)):
+            v = p.vertices[i, : int(p.depth[i]) + 2]
+            mid = 0.5 * (v[1:] + v[:-1])
+            assert not inside_solid_objects(s, mid, solids).any(), (scene_name, i, v)

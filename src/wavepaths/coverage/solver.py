@@ -323,6 +323,22 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     return pair[order], key[order], result.a[order] * phase, (np.abs(result.a) ** 2)[order], field
 
 
+def _outside_solids(scene: Scene, ctx: TxContext, paths: Paths, stats: Counter) -> Paths:
+    """``paths`` without those whose first leg enters a solid from a transmitter lying on its
+    surface (:func:`wavepaths.search.on_faces.legs_into_solids`; the cells on a solid's
+    surface are masked). The transmitters' faces are found once per context."""
+    from ..search.on_faces import legs_into_solids, solid_face_normals
+
+    normals = ctx.derived.get("tx_solid_normals")
+    if normals is None:
+        normals = ctx.derived["tx_solid_normals"] = solid_face_normals(scene, ctx.tx)
+    if not normals:
+        return paths
+    inward = legs_into_solids(paths, normals, {})
+    stats["paths_dropped_into_solid"] = int(inward.sum())  # of the tile's last assembly (all its paths)
+    return paths.select(~inward) if inward.any() else paths
+
+
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
     """Trace one tile of cell centres ``rx`` (k, 3) [m] and sum their path coefficients.
 
@@ -333,7 +349,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     m, k = len(ctx.tx), len(rx)
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
-    paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
+    paths = _outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats)
     pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
@@ -342,7 +358,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
         # the fields again, with every path: a diffraction term next to a shadow or reflection
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
-        paths = assemble(ctx.tx, rx, batches, dict(stats), sort=False)
+        paths = _outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats)
         pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at

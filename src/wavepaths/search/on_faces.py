@@ -67,3 +67,46 @@ def points_on_surfaces(scene: Scene, points: np.ndarray, budget: int = BUDGET) -
     i, q = _on_face_pairs(scene, points, budget)
     out[i, scene.polygon_object[q]] = True
     return out
+
+
+def solid_face_normals(scene: Scene, points: np.ndarray, budget: int = BUDGET) -> dict[int, np.ndarray]:
+    """For each point lying on faces of solid objects: ``{point: (k, 3) outward unit normals}``
+    of those faces (a point on a block's edge has two). Empty for points on no solid."""
+    from ..scene.closed import solid_objects_mask
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    i, q = _on_face_pairs(scene, points, budget)
+    if len(i) == 0:
+        return {}
+    solid = solid_objects_mask(scene)[scene.polygon_object[q]] & (scene.outward_sign[q] != 0)
+    i, q = i[solid], q[solid]
+    normals = scene.polygon_normal[q] * scene.outward_sign[q][:, None]
+    return {int(p): normals[i == p] for p in np.unique(i)}
+
+
+def legs_into_solids(paths, tx_normals: dict[int, np.ndarray], rx_normals: dict[int, np.ndarray],
+                     rx_offset: int = 0) -> np.ndarray:
+    """(N,) bool: paths whose first leg leaves a transmitter lying on a solid's face into the
+    solid, or whose last leg reaches a receiver lying on one from inside it.
+
+    The occlusion rule lets a segment pass whose end lies on a face (docs/stress.md, "What
+    blocks a segment"): from a point on a block's wall, a leg through the block crosses no face
+    in its interior. A leg from such an end is inside the solid when it points against the
+    outward normal of a face the end lies on by more than rounding (``d . n < -1e-12 |d|``);
+    a leg along the face is the limit from outside and stays. ``rx_offset``: the receivers'
+    index offset of ``paths`` (a coverage tile's).
+    """
+    bad = np.zeros(len(paths), dtype=bool)
+    if not tx_normals and not rx_normals or len(paths) == 0:
+        return bad
+    rows = np.arange(len(paths))
+    first = paths.vertices[:, 1] - paths.vertices[:, 0]
+    back = paths.vertices[rows, paths.depth] - paths.vertices[rows, paths.depth + 1]  # from rx to the vertex before
+    for index, legs, normals_of in ((paths.tx_index, first, tx_normals), (paths.rx_index + rx_offset, back, rx_normals)):
+        for point, normals in normals_of.items():
+            on = np.nonzero(index == point)[0]
+            if len(on):
+                d = legs[on]
+                size = np.sqrt(np.einsum("ij,ij->i", d, d))
+                bad[on] |= ((d @ normals.T) < -1e-12 * size[:, None]).any(axis=1)
+    return bad
