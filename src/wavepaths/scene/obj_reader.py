@@ -103,9 +103,8 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
             by_count.setdefault(len(refs), []).append(f)
     if not by_count:
         return out
-    used = np.unique(np.concatenate([np.asarray(faces[f]) for fs in by_count.values() for f in fs]))
-    lo, hi = verts[used].min(axis=0), verts[used].max(axis=0)
-    diagonal = float(np.linalg.norm(hi - lo)) if np.isfinite(hi - lo).all() else 0.0
+    finite_verts = verts[np.isfinite(verts).all(axis=1)]
+    diagonal = float(np.linalg.norm(finite_verts.max(axis=0) - finite_verts.min(axis=0))) if len(finite_verts) else 0.0
     eps, flat = tolerances.weld * diagonal, tolerances.plane_distance * diagonal
     bent: list[tuple[float, int]] = []
     tangled: list[int] = []
@@ -117,12 +116,11 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
         planes = polygon_planes(np.where(finite[:, None, None], points, 0.0), eps)
         valid = planes.valid & finite
         good = ~valid | fan_is_valid(planes.uv, eps)  # no area: the fan (the scene drops flat triangles)
-        for r, f in enumerate(fs):
-            if valid[r] and planes.deviation[r] > flat:
-                bent.append((float(planes.deviation[r]), f))
-            if good[r]:
-                out[f] = fan[r]
-                continue
+        bent += [(float(planes.deviation[r]), fs[r]) for r in np.flatnonzero(valid & (planes.deviation > flat))]
+        for r in np.flatnonzero(good):
+            out[fs[r]] = fan[r]
+        for r in np.flatnonzero(~good):
+            f = fs[r]
             tris, clean = triangulate_polygon(planes.uv[r], eps)
             out[f] = index[r][tris]
             if not clean:
