@@ -44,8 +44,6 @@ UpAxis = Literal["auto", "y", "z"]
 # ----------------------------------------------------------------------------- mesh files
 
 
-
-
 def _trimesh_parts(loaded, path: str) -> list[tuple[str, trimesh.Trimesh]]:
     """``(name, mesh in world coordinates)`` of every triangle mesh trimesh read."""
     if isinstance(loaded, trimesh.Trimesh):
@@ -81,7 +79,7 @@ def _part_material_name(geom: trimesh.Trimesh) -> str | None:
     return str(name) if name else None
 
 
-def _resolve_materials(path: str, names: tuple[str, ...], default: Material,
+def _resolve_materials(names: tuple[str, ...], default: Material,
                        materials: Mapping[str, Material | str] | None) -> tuple[list[Material], list[str]]:
     """The material of each of a file's material ``names``, and the names left to ``default``.
 
@@ -126,7 +124,7 @@ def _read_obj_file(path: str, material: Material, tolerances: SceneTolerances | 
     """Scene arrays of an OBJ file read by :func:`~wavepaths.scene.obj_reader.read_obj`:
     objects from its ``o`` (or ``g``) statements, materials from its ``usemtl`` names."""
     mesh = read_obj(path, tolerances)
-    mats, unknown = _resolve_materials(path, mesh.material_names, material, materials)
+    mats, unknown = _resolve_materials(mesh.material_names, material, materials)
     _warn_unknown_materials(path, unknown, material)
     tmat, table = _used_materials(mesh.triangle_material + 1, [material, *mats])  # index 0: no usemtl
     return mesh.vertices, mesh.triangles, mesh.triangle_object, tmat, mesh.object_names, table
@@ -154,7 +152,7 @@ def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances |
         raise SceneError(f"{path}: the mesh has no faces")
     part_names = [_part_material_name(g) for _, g in parts]
     used = tuple(dict.fromkeys(n for n in part_names if n is not None))
-    mats, unknown = _resolve_materials(path, used, material, materials)
+    mats, unknown = _resolve_materials(used, material, materials)
     _warn_unknown_materials(path, unknown, material)
     index = {n: i + 1 for i, n in enumerate(used)}
     verts, tris, tobj, tmat = [], [], [], []
