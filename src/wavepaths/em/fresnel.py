@@ -122,7 +122,7 @@ def _half_space_parts(eta: NDArray[np.complex128], c: NDArray[np.float64]) -> _H
     With ``root^2 = eta - 1 + c^2``: ``r_te = (1 - eta)/(c + root)^2``,
     ``r_tm = (eta - 1)((eta + 1)c^2 - 1)/(eta c + root)^2``,
     ``1 - r_te^2 = 4 c root/(c + root)^2`` and ``1 - r_tm^2 = 4 eta c root/(eta c + root)^2``.
-    Above ``|eta| = 1e100`` (a conductivity of about 2e88 S/m at 3.5 GHz) the coefficients
+    Above ``|eta| = 1e100`` (a conductivity of about 2e99 S/m at 3.5 GHz) the coefficients
     are a perfect conductor's, ``(-1, +1)`` with ``1 - r^2 = 0``: within 1e-16 of the formula
     for ``cos theta >= 1e-34``, where the formula's squares would overflow from ``|eta| ~ 1e154``.
     """
