@@ -41,7 +41,7 @@ import trimesh
 from ..em.materials import ITU_MATERIALS, Material, material_from_sionna
 from ..errors import SceneError, WavepathsError
 from .model import WavepathsWarning
-from .obj_faces import concave_obj_faces
+from .obj_reader import concave_obj_faces
 
 _RADIO_BSDFS = ("itu-radio-material", "radio-material", "absorber-radio-material")
 # Mitsuba objects that carry no geometry or radio material: read past, not an error.

@@ -2,77 +2,17 @@
 
 trimesh (and Mitsuba 3, ``src/shapes/obj.cpp``) split every OBJ face into a fan from its
 first vertex, which covers area outside a concave face (an L-shaped roof gains the square
-that closes the L). :func:`triangulate_polygon` splits a face by ear clipping in its plane
-(:mod:`wavepaths.scene.obj_reader` uses it where the fan would leave the face);
-:func:`concave_obj_faces` lists the concave faces for the XML reader, which keeps the fans
-as Mitsuba does (docs/scenes.md).
+that closes the L). The geometry of faces in their planes (:func:`polygon_planes`, the fan's
+triangles) and :func:`triangulate_polygon`, ear clipping in the plane, which
+:mod:`wavepaths.scene.obj_reader` uses where the fan would leave the face (docs/scenes.md).
 """
 
 from __future__ import annotations
 
-import re
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
-
-from .tolerances import SceneTolerances
-
-
-# Separators and vertex references of OBJ statements; a backslash at the end of a line
-# continues the statement (trimesh joins such lines too).
-_SEP = r"(?:[ \t]|\\\n)+"
-_REF = r"[^\s#\\]+"
-# Vertex lines as trimesh counts them ("\nv "): the first three numbers are the position.
-_OBJ_VERTEX = re.compile(rf"^v [ \t]*({_REF}){_SEP}({_REF}){_SEP}({_REF})", re.MULTILINE)
-# Face statements with four or more vertex references (the rest of the line is a comment).
-_OBJ_POLYGON = re.compile(rf"^f(?:{_SEP}{_REF}){{4,}}[^\n]*", re.MULTILINE)
-
-
-def obj_vertices(text: str) -> np.ndarray | None:
-    """Vertex positions ``(v, 3)`` [m] of an OBJ text, or None if a ``v`` line is not numbers."""
-    rows = _OBJ_VERTEX.findall(text)
-    if not rows:
-        return np.zeros((0, 3))
-    try:
-        return np.array(rows, dtype=np.float64).reshape(-1, 3)
-    except ValueError:
-        return None
-
-
-def _refs(statement: str) -> list[str]:
-    """Vertex references of an ``f`` statement, as written (``"12"``, ``"12/3"``, ``"12/3/7"``)."""
-    return statement.split("#", 1)[0].replace("\\\n", " ").split()[1:]
-
-
-def _vertex_indices(refs: list[str], count: int) -> tuple[np.ndarray, np.ndarray]:
-    """0-based vertex indices of references, read as trimesh reads them (a negative index
-    counts from the end of the file's vertices), and whether each is a vertex of the file."""
-    heads = [r.split("/", 1)[0] for r in refs]
-    try:
-        k = np.array(heads, dtype=np.int64)
-    except ValueError:
-        k = np.array([int(h) if h.lstrip("+-").isdigit() else 0 for h in heads], dtype=np.int64)
-    index = np.where(k > 0, k - 1, count + k)
-    return index, (k != 0) & (index >= 0) & (index < count)
-
-
-def _line_numbers(text: str, starts: np.ndarray) -> np.ndarray:
-    """Line numbers (1-based) of positions in ``text``, in one pass."""
-    lines = np.empty(len(starts), np.int64)
-    line, pos = 1, 0
-    for j in np.argsort(starts, kind="stable"):
-        line += text.count("\n", pos, int(starts[j]))
-        pos = int(starts[j])
-        lines[j] = line
-    return lines
-
-
-def _statement(text: str, start: int, end: int, limit: int = 60) -> str:
-    """The ``f`` statement at ``text[start:end]``, shortened to ``limit`` characters (for messages)."""
-    out = "f " + " ".join(_refs(text[start:end]))
-    return out if len(out) <= limit else out[: limit - 3] + "..."
 
 
 def _extent(points: np.ndarray, axis: int | None = None) -> np.ndarray | float:
@@ -283,115 +223,3 @@ def triangulate_polygon(uv: np.ndarray, eps: float) -> tuple[np.ndarray, bool]:
     signed = _cross2(uv, np.roll(uv, -1, axis=0)).sum() / 2
     perimeter = np.linalg.norm(uv - np.roll(uv, -1, axis=0), axis=1).sum()
     return tris, clipper.clean and abs(covered - signed) <= eps * perimeter
-
-
-# ----------------------------------------------------------------------------- OBJ faces, fixed
-
-
-@dataclass(frozen=True)
-class _ObjFaces:
-    """The faces of an OBJ text with one vertex count ``k >= 4``.
-
-    Attributes
-    ----------
-    start, end : (m,) int64
-        Spans of their ``f`` statements in the text.
-    planes : PolygonPlanes
-    """
-
-    start: np.ndarray
-    end: np.ndarray
-    planes: PolygonPlanes
-
-
-def _obj_faces(text: str, eps_of: float) -> tuple[list[_ObjFaces], float] | None:
-    """The faces of four or more vertices of an OBJ text, grouped by vertex count, and the
-    diagonal of the file's vertices [m]; None when there are none.
-
-    Faces with a reference that is not a vertex of the file, or with non-finite
-    coordinates, are left out (trimesh and the scene builder report those).
-    ``eps_of`` times the diagonal is the length below which a face has no area.
-    """
-    if not _OBJ_POLYGON.search(text):
-        return None
-    vertices = obj_vertices(text)
-    if vertices is None:
-        return None  # not numbers: trimesh reports it
-    groups: dict[int, tuple[list[int], list[int], list[str]]] = {}
-    for match in _OBJ_POLYGON.finditer(text):
-        refs = _refs(match.group(0))
-        starts, ends, flat = groups.setdefault(len(refs), ([], [], []))
-        starts.append(match.start())
-        ends.append(match.end())
-        flat.extend(refs)
-    diagonal = _extent(vertices)
-    out = []
-    for k, (starts, ends, flat) in groups.items():
-        index, ok = _vertex_indices(flat, len(vertices))
-        index, ok = index.reshape(-1, k), ok.reshape(-1, k).all(axis=1)
-        points = vertices[np.where(ok[:, None], index, 0)]
-        keep = ok & np.isfinite(points).all(axis=(1, 2))
-        if keep.any():
-            out.append(_ObjFaces(np.array(starts)[keep], np.array(ends)[keep],
-                                 polygon_planes(points[keep], eps_of * diagonal)))
-    return out, diagonal
-
-
-def read_obj_text(path: str) -> str:
-    with open(path, "rb") as fh:
-        return trimesh.util.decode_text(fh.read()).replace("\r\n", "\n")
-
-
-@dataclass(frozen=True)
-class ConcaveFace:
-    """An OBJ face whose fan from its first vertex leaves it.
-
-    Attributes
-    ----------
-    line : int
-        Line number (1-based) of its ``f`` statement.
-    statement : str
-        The statement (shortened).
-    area : float
-        Area of the face [m^2].
-    fan_area : float
-        Total area of its fan triangles [m^2], each counted positive, as a mesh counts them.
-    """
-
-    line: int
-    statement: str
-    area: float
-    fan_area: float
-
-
-def concave_obj_faces(path: str, tolerances: SceneTolerances | None = None) -> list[ConcaveFace]:
-    """The faces of an OBJ file that a fan from their first vertex triangulates wrongly.
-
-    Mitsuba 3 splits every OBJ face so (``src/shapes/obj.cpp``), and so does trimesh: the
-    fan triangles of these faces cover area outside them (concave faces), in file order.
-
-    Parameters
-    ----------
-    path : str
-    tolerances : SceneTolerances, optional
-        ``weld``, times the diagonal of the file's vertices, is the length below which a
-        triangle counts as flat.
-    """
-    tol = tolerances or SceneTolerances()
-    text = read_obj_text(path)
-    found = _obj_faces(text, tol.weld)
-    if found is None:
-        return []
-    batches, diagonal = found
-    eps = tol.weld * diagonal
-    rows = []
-    for b in batches:
-        doubled, longest = fan_doubled_areas(b.planes.uv)
-        inverted = b.planes.valid & np.any(doubled < -eps * longest, axis=1)  # the fan leaves the face
-        for i in np.flatnonzero(inverted):
-            rows.append((int(b.start[i]), int(b.end[i]), float(b.planes.area[i]), float(np.abs(doubled[i]).sum() / 2)))
-    rows.sort()
-    lines = _line_numbers(text, np.array([r[0] for r in rows], np.int64))
-    return [ConcaveFace(int(n), _statement(text, s, e), a, f) for n, (s, e, a, f) in zip(lines, rows)]
-
-

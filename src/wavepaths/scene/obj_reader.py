@@ -28,10 +28,11 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 from ..errors import SceneError
 from .model import WavepathsWarning, external_stacklevel
-from .obj_faces import fan_is_valid, polygon_planes, read_obj_text, triangulate_polygon
+from .obj_faces import fan_doubled_areas, fan_is_valid, polygon_planes, triangulate_polygon
 from .tolerances import SceneTolerances
 
 
@@ -52,6 +53,8 @@ class ObjMesh:
         Index into ``material_names``; -1 for a face with no ``usemtl`` before it.
     material_names : tuple of str
         The ``usemtl`` names, in order of first use.
+    concave : tuple of ConcaveFace
+        The faces whose fan from the first vertex leaves them, in file order.
     """
 
     vertices: np.ndarray
@@ -60,6 +63,34 @@ class ObjMesh:
     object_names: tuple[str, ...]
     triangle_material: np.ndarray
     material_names: tuple[str, ...]
+    concave: tuple["ConcaveFace", ...] = ()
+
+
+@dataclass(frozen=True)
+class ConcaveFace:
+    """An OBJ face whose fan from its first vertex leaves it.
+
+    Attributes
+    ----------
+    line : int
+        Line number (1-based) of its ``f`` statement.
+    statement : str
+        The statement (shortened).
+    area : float
+        Area of the face [m^2].
+    fan_area : float
+        Total area of its fan triangles [m^2], each counted positive, as a mesh counts them.
+    """
+
+    line: int
+    statement: str
+    area: float
+    fan_area: float
+
+
+def read_obj_text(path: str) -> str:
+    with open(path, "rb") as fh:
+        return trimesh.util.decode_text(fh.read()).replace("\r\n", "\n")
 
 
 def _index(token: str, count: int, path: str, line: int) -> int:
@@ -92,9 +123,11 @@ def _statements(lines: list[str]):
 
 
 def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: list[int], statements: list[str],
-                 tolerances: SceneTolerances) -> list[np.ndarray]:
-    """Triangles ``(t_i, 3)`` of vertex indices for each face (see the module docstring)."""
+                 tolerances: SceneTolerances, warn: bool) -> tuple[list[np.ndarray], list[ConcaveFace]]:
+    """Triangles ``(t_i, 3)`` of vertex indices for each face (see the module docstring), and
+    the concave faces (whose fan leaves them)."""
     out: list[np.ndarray] = [np.zeros((0, 3), np.int64)] * len(faces)
+    concave: list[tuple[int, ConcaveFace]] = []
     by_count: dict[int, list[int]] = {}
     for f, refs in enumerate(faces):
         if len(refs) == 3:
@@ -102,7 +135,7 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
         else:
             by_count.setdefault(len(refs), []).append(f)
     if not by_count:
-        return out
+        return out, []
     finite_verts = verts[np.isfinite(verts).all(axis=1)]
     diagonal = float(np.linalg.norm(finite_verts.max(axis=0) - finite_verts.min(axis=0))) if len(finite_verts) else 0.0
     eps, flat = tolerances.weld * diagonal, tolerances.plane_distance * diagonal
@@ -119,12 +152,27 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
         bent += [(float(planes.deviation[r]), fs[r]) for r in np.flatnonzero(valid & (planes.deviation > flat))]
         for r in np.flatnonzero(good):
             out[fs[r]] = fan[r]
+        doubled, longest = fan_doubled_areas(planes.uv)
+        for r in np.flatnonzero(valid & np.any(doubled < -eps * longest, axis=1)):  # the fan leaves the face
+            concave.append((fs[r], ConcaveFace(lines[fs[r]], _short(statements[fs[r]]), float(planes.area[r]),
+                                               float(np.abs(doubled[r]).sum() / 2))))
         for r in np.flatnonzero(~good):
             f = fs[r]
             tris, clean = triangulate_polygon(planes.uv[r], eps)
             out[f] = index[r][tris]
             if not clean:
                 tangled.append(f)
+    if warn:
+        _warn_bent_and_tangled(path, bent, tangled, flat, lines, statements)
+    return out, [c for _, c in sorted(concave, key=lambda fc: fc[0])]
+
+
+def _short(statement: str, limit: int = 60) -> str:
+    return statement if len(statement) <= limit else statement[: limit - 3] + "..."
+
+
+def _warn_bent_and_tangled(path: str, bent: list[tuple[float, int]], tangled: list[int], flat: float,
+                           lines: list[int], statements: list[str]) -> None:
     if bent:
         dev, f = max(bent)
         warnings.warn(
@@ -141,11 +189,11 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
             f"{statements[f][:60]!r}); their triangles cover another region than intended",
             WavepathsWarning, stacklevel=external_stacklevel(),
         )
-    return out
 
 
-def read_obj(path: str, tolerances: SceneTolerances | None = None) -> ObjMesh:
-    """The triangles, objects and material names of the OBJ file ``path``.
+def read_obj(path: str, tolerances: SceneTolerances | None = None, warn: bool = True) -> ObjMesh:
+    """The triangles, objects and material names of the OBJ file ``path``; ``warn``: about
+    bent and self-intersecting faces.
 
     Raises
     ------
@@ -192,10 +240,24 @@ def read_obj(path: str, tolerances: SceneTolerances | None = None) -> ObjMesh:
     if not faces:
         raise SceneError(f"{path}: the mesh has no faces")
     vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
-    split = _split_faces(path, vertices, faces, face_line, face_text, tolerances or SceneTolerances())
+    split, concave = _split_faces(path, vertices, faces, face_line, face_text, tolerances or SceneTolerances(), warn)
     counts = np.array([len(t) for t in split])
     t = np.concatenate(split)
     used, inverse = np.unique(t, return_inverse=True)
     return ObjMesh(vertices[used], inverse.reshape(-1, 3).astype(np.int64),
                    np.repeat(np.asarray(face_object, np.int64), counts), tuple(objects),
-                   np.repeat(np.asarray(face_material, np.int64), counts), tuple(materials))
+                   np.repeat(np.asarray(face_material, np.int64), counts), tuple(materials), tuple(concave))
+
+
+def concave_obj_faces(path: str, tolerances: SceneTolerances | None = None) -> list[ConcaveFace]:
+    """The faces of an OBJ file that a fan from their first vertex triangulates wrongly.
+
+    Mitsuba 3 splits every OBJ face so (``src/shapes/obj.cpp``), and so does trimesh: the
+    fan triangles of these faces cover area outside them (concave faces), in file order.
+    Read by :func:`read_obj` (no warnings of its own); a file it refuses has none listed
+    (the caller reads the geometry and reports such a file).
+    """
+    try:
+        return list(read_obj(path, tolerances, warn=False).concave)
+    except SceneError:
+        return []
