@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from wavepaths.coverage import CoverageOptions, PlanarGrid, coverage
-from wavepaths.coverage.solver import _tolerance_drop_numpy
+from wavepaths.coverage.tolerance import tolerance_drop_numpy as _tolerance_drop_numpy
 from wavepaths.fields import FieldConfig
 from wavepaths.scene import load_scene
 from wavepaths.search import TraceOptions, kernels

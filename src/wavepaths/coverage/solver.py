@@ -26,7 +26,6 @@ import dataclasses
 import os
 import sys
 import time
-import warnings
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable
@@ -35,11 +34,10 @@ import numpy as np
 
 from ..errors import WavepathsError
 from ..fields import FieldConfig, compute_fields
-from ..scene.model import Scene, WavepathsWarning
+from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
 from ..search.paths import InteractionType, Paths, assemble, coincident_paths, path_order
-from ..search import kernels
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
@@ -47,6 +45,8 @@ from ..search.trace import _warn_on_faces, check_positions, points_on_faces
 from .grid import Grid, MeshGrid, PlanarGrid
 from .inside import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap
+from .surfaces import cells_on_faces, outside_solids, warn_cells_on_faces
+from .tolerance import tolerance_keep
 
 # result bytes per cell and transmitter: a_total (16) + a_sum (3 x 16) + power_sum (3 x 8)
 # + num_paths (3 x 4) + field_total (3 x 16) + field_power_sum (8), plus the derived dB maps
@@ -228,77 +228,6 @@ def path_mechanism(paths: Paths) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def peak_pattern_amplitude(antenna, port: int = 0, samples: int = 181) -> float:
-    """The largest ``sqrt(|C_theta|^2 + |C_phi|^2)`` of an antenna port over all directions.
-
-    Sampled on a ``samples x 2 samples`` grid of the sphere (1 degree by default) and raised
-    by 1 % (the patterns are smooth: between samples they cannot rise more than that).
-    """
-    from ..em.antennas import antenna_field
-
-    th, ph = np.meshgrid(np.linspace(0, np.pi, samples), np.linspace(-np.pi, np.pi, 2 * samples))
-    d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1).reshape(-1, 3)
-    c = antenna_field(antenna, d)[:, port, :]
-    return 1.01 * float(np.sqrt((np.abs(c) ** 2).sum(axis=1)).max())
-
-
-def _tolerance_keep(ctx: TxContext, config: FieldConfig, pending: list, go_power: np.ndarray, k: int,
-                    stats: Counter) -> list[np.ndarray]:
-    """Which held-back diffracted candidates a map with ``tolerance_db`` keeps (one mask per entry).
-
-    Per (transmitter, cell), the candidates are taken weakest bound first and dropped while
-    the sum of their power bounds stays at most ``(10^(tol/10) - 1)`` times the power of the
-    cell's line-of-sight and reflected paths ``go_power`` (m * k,). Dropped paths carry at
-    most that power, so the cell's power-sum total changes by at most ``tol`` dB.
-    """
-    eps = 10 ** (ctx.options.tolerance_db / 10) - 1
-    scale = (config.wavelength / (4 * np.pi) * peak_pattern_amplitude(config.tx_antenna)
-             * peak_pattern_amplitude(config.rx_antenna)) ** 2
-    sizes = [len(p) for p in pending]
-    pair = np.concatenate([p.tx * k + p.rx for p in pending])
-    bound = np.concatenate([np.full(len(p), np.inf) if p.amp is None else p.amp for p in pending]) ** 2 * scale
-    if ctx.options.compiled and kernels.available():
-        from ..search import _numba_tolerance
-
-        drop = _numba_tolerance.tolerance_drop(pair.astype(np.int64), bound, np.ascontiguousarray(go_power, dtype=np.float64),
-                                     float(eps), int(len(go_power)))
-    else:
-        drop = _tolerance_drop_numpy(pair, bound, go_power, eps)
-    stats["tolerance_dropped_candidates"] += int(drop.sum())
-    return np.split(~drop, np.cumsum(sizes)[:-1])
-
-
-def _tolerance_drop_numpy(pair: np.ndarray, bound: np.ndarray, go_power: np.ndarray, eps: float) -> np.ndarray:
-    """(k,) bool: the candidates :func:`_tolerance_keep` drops, from their (transmitter, cell)
-    pairs ``pair``, power bounds ``bound`` and the pairs' geometrical-optics powers
-    ``go_power`` (the reference of ``wavepaths.search._numba_tolerance.tolerance_drop``).
-
-    Per pair, its candidates by bound (weakest first; ties in their order) and a running sum
-    of its own, started at 0, an infinite bound counted as 0 and never dropped (it sorts
-    last); a candidate is dropped while its pair's sum stays at most ``eps * go_power[pair]``.
-    The sums are added rank by rank (the pairs' first candidates, then their second, ...),
-    so each pair's sum is added in the kernel's order, from 0, and never differenced out of
-    a sum over other pairs (which loses a bound below ~1e-16 of those pairs' total).
-    """
-    order = np.lexsort((bound, pair))
-    sp, sb = pair[order], bound[order]
-    finite = np.isfinite(sb)
-    val = np.where(finite, sb, 0.0)
-    first = np.searchsorted(sp, sp, side="left")
-    rank = np.arange(len(sp)) - first  # position within its pair
-    by_rank = np.argsort(rank, kind="stable")
-    edges = np.searchsorted(rank[by_rank], np.arange(rank.max(initial=-1) + 2))
-    cum = np.zeros(len(go_power))  # each pair's running sum
-    within = np.empty(len(sp))
-    for r in range(len(edges) - 1):  # one pass per rank (at most one candidate of a pair each)
-        at = by_rank[edges[r]:edges[r + 1]]
-        cum[sp[at]] += val[at]
-        within[at] = cum[sp[at]]
-    drop = np.zeros(len(pair), dtype=bool)
-    drop[order] = finite & (within <= eps * go_power[sp])
-    return drop
-
-
 def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int):
     """(pair, key, a_phased, power) of ``paths``: indices for the per-cell sums and the values,
     in the canonical order of :func:`wavepaths.search.paths.path_order`, whatever order
@@ -323,42 +252,26 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     return pair[order], key[order], result.a[order] * phase, (np.abs(result.a) ** 2)[order], field
 
 
-def _outside_solids(scene: Scene, ctx: TxContext, paths: Paths, stats: Counter) -> Paths:
-    """``paths`` without those whose first leg enters a solid from a transmitter lying on its
-    surface (:func:`wavepaths.search.on_faces.legs_into_solids`; the cells on a solid's
-    surface are masked). The transmitters' faces are found once per context."""
-    from ..search.on_faces import legs_into_solids, solid_face_normals
-
-    normals = ctx.derived.get("tx_solid_normals")
-    if normals is None:
-        normals = ctx.derived["tx_solid_normals"] = solid_face_normals(scene, ctx.tx)
-    if not normals:
-        return paths
-    inward = legs_into_solids(paths, normals, {})
-    stats["paths_dropped_into_solid"] = int(inward.sum())  # of the tile's last assembly (all its paths)
-    return paths.select(~inward) if inward.any() else paths
-
-
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
     """Trace one tile of cell centres ``rx`` (k, 3) [m] and sum their path coefficients.
 
     ``rx`` must be finite and off the transmitters (checked by :func:`coverage`). With
     ``TraceOptions.tolerance_db``, the diffracted candidates are held back until the fields of
-    the other paths are known, and the weakest are dropped (:func:`_tolerance_keep`).
+    the other paths are known, and the weakest are dropped (:func:`~wavepaths.coverage.tolerance.tolerance_keep`).
     """
     m, k = len(ctx.tx), len(rx)
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
-    paths = _outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats)
+    paths = outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats)
     pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
-        keeps = _tolerance_keep(ctx, config, pending, go_power, k, stats)
+        keeps = tolerance_keep(ctx, config, pending, go_power, k, stats)
         batches += [finish_diffraction(scene, ctx, p, 0, stats, keep) for p, keep in zip(pending, keeps)]
         # the fields again, with every path: a diffraction term next to a shadow or reflection
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
-        paths = _outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats)
+        paths = outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats)
         pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at
@@ -480,7 +393,7 @@ def coverage(
     t = time.perf_counter()
     grid_key = hashlib.sha1(flat.tobytes()).hexdigest()
     # the faces cell centres lie on, and whether on a solid's surface (cached per grid)
-    faces, on_solid = _cached(scene, "onface:" + grid_key, lambda: _cells_on_faces(scene, flat))
+    faces, on_solid = _cached(scene, "onface:" + grid_key, lambda: cells_on_faces(scene, flat))
     if cov.mask_inside:
         solids = _cached(scene, "solids", lambda: solid_objects(scene))
         inside = _cached(scene, "inside:" + grid_key, lambda: inside_solid_objects(scene, flat, solids))
@@ -501,7 +414,7 @@ def coverage(
     timings["inside_s"] = time.perf_counter() - t
     active = np.nonzero(~inside)[0]
     _warn_on_faces(scene, tx, np.empty((0, 3)))  # as trace() does: such a transmitter is on no side of its face
-    _warn_cells_on_faces(scene, flat, active, faces[active], int((on_solid & inside).sum()))
+    warn_cells_on_faces(scene, flat, active, faces[active], int((on_solid & inside).sum()))
     _check_off_transmitters(scene, tx, flat, active, grid)
 
     t = time.perf_counter()
@@ -598,40 +511,6 @@ def _check_materials(scene: Scene, cfg: FieldConfig) -> None:
         material = scene.materials[i]
         if material.kind not in ("pec", "absorber"):
             relative_permittivity(material, cfg.frequency_hz)  # raises WavepathsError out of range
-
-
-def _cells_on_faces(scene: Scene, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(faces, on_solid)`` of cell centres ``flat``: a polygon each lies exactly on (-1: none,
-    :func:`~wavepaths.search.on_faces.points_on_faces`) and whether it lies on a face of a
-    solid object. Skipped (none on a face) beyond the on-face test's budget of point x polygon tests."""
-    from ..scene.closed import solid_objects_mask
-    from ..search.on_faces import points_on_surfaces
-
-    faces = points_on_faces(scene, flat)
-    on_solid = np.zeros(len(flat), bool)
-    if (faces >= 0).any():
-        rows = np.nonzero(faces >= 0)[0]
-        on_solid[rows] = points_on_surfaces(scene, flat[rows])[:, solid_objects_mask(scene)].any(axis=1)
-    return faces, on_solid
-
-
-def _warn_cells_on_faces(scene: Scene, flat: np.ndarray, active: np.ndarray, face: np.ndarray,
-                         masked: int = 0) -> None:
-    """Warn when cell centres lie exactly on a face (a grid whose centres fall on walls: the
-    street canyon's footprint grid at 2 m put whole columns on them). Those on a solid's
-    surface (``masked`` of them) are masked like the cells inside it; the others (a ground, a
-    screen) are traced, with fields that are the limit from neither side of the face."""
-    on = np.nonzero(face >= 0)[0]  # face: points_on_faces of the active cells
-    if len(on) or masked:
-        first = (f" (first traced: cell {int(active[on[0]])} at {flat[active[on[0]]].tolist()}, object "
-                 f"{scene.object_names[scene.polygon_object[face[on[0]]]]})") if len(on) else ""
-        warnings.warn(
-            f"{len(on) + masked} cell centres lie exactly on a face: {masked} on the surface of a solid object, "
-            f"masked like the cells inside it; {len(on)} traced{first}, taking part in no reflection or "
-            "diffraction on that face, their fields the limit from neither side; offset the grid by a fraction "
-            "of a cell or change its height (PlanarGrid's `center` and `height`, --center and --height)",
-            WavepathsWarning, stacklevel=3,
-        )
 
 
 def _check_off_transmitters(scene: Scene, tx: np.ndarray, flat: np.ndarray, active: np.ndarray, grid: Grid) -> None:

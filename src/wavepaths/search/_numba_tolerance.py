@@ -1,6 +1,6 @@
 """The numba twins of the tolerance of coverage maps (``TraceOptions.tolerance_db``): the
 diffracted candidates' amplitude bounds (:func:`wavepaths.search.diffraction._diffraction_amplitude_bound`)
-and the choice of the candidates dropped (:func:`wavepaths.coverage.solver._tolerance_drop_numpy`),
+and the choice of the candidates dropped (:func:`wavepaths.coverage.tolerance.tolerance_drop_numpy`),
 imported only when numba is installed; the numpy functions named in each comment are the
 references."""
 
@@ -57,7 +57,7 @@ def amplitude_bounds(phi, phi_prime, n, te, de, tr, dr, t, k, floor, utd_floor):
 
 @numba.njit(cache=True, nogil=True)
 def tolerance_drop(pair, bound, go_power, eps, n_pairs):
-    # coverage.solver._tolerance_drop_numpy (the reference): per (transmitter, cell) pair,
+    # coverage.tolerance.tolerance_drop_numpy (the reference): per (transmitter, cell) pair,
     # its candidates by bound (ties in their order), as np.lexsort((bound, pair)); one
     # running sum per pair, started at 0 and added in that order as the reference's
     # (infinite bounds counted as 0, never dropped), each candidate dropped while its pair's
