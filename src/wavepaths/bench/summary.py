@@ -13,8 +13,6 @@ The job of this module is the summary of a benchmark run, from the results alone
 from __future__ import annotations
 
 import os
-import platform
-import sys
 
 import numpy as np
 
@@ -23,14 +21,10 @@ __all__ = ["headline", "machine_info"]
 
 def machine_info() -> dict:
     """CPU, cores, memory, OS and the versions of everything that is timed."""
-    import numpy
-    import scipy
+    from .._machine import host_versions
 
-    from .. import __version__
-
-    out = {"wavepaths": __version__, "python": sys.version.split()[0], "numpy": numpy.__version__,
-           "scipy": scipy.__version__, "platform": platform.platform(), "machine": platform.machine(),
-           "cpus": os.cpu_count(), "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE")}
+    out = host_versions()
+    out["openblas_coretype"] = os.environ.get("OPENBLAS_CORETYPE")
     try:
         from importlib.metadata import version
 
@@ -38,11 +32,6 @@ def machine_info() -> dict:
     except Exception:  # pragma: no cover
         pass
     try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    out["cpu"] = line.split(":", 1)[1].strip()
-                    break
         with open("/proc/meminfo") as f:
             out["memory_bytes"] = int(f.readline().split()[1]) * 1024
     except OSError:  # pragma: no cover

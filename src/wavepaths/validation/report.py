@@ -32,8 +32,6 @@ from __future__ import annotations
 import html
 import json
 import os
-import platform
-import sys
 import time
 
 import numpy as np
@@ -181,14 +179,9 @@ def _finite_max(x: np.ndarray):
 
 
 def _versions() -> dict:
-    import numpy
-    import scipy
+    from .._machine import host_versions
 
-    from .. import __version__
-
-    out = {"wavepaths": __version__, "python": sys.version.split()[0], "numpy": numpy.__version__,
-           "scipy": scipy.__version__, "platform": platform.platform(), "machine": platform.machine(),
-           "cpus": os.cpu_count()}
+    out = host_versions()
     try:
         from .sionna_env import sionna_version
 
@@ -199,14 +192,6 @@ def _versions() -> dict:
         out["mitsuba"] = mitsuba.__version__
         out["drjit"] = drjit.__version__
     except Exception:  # pragma: no cover - reported as missing
-        pass
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    out["cpu"] = line.split(":", 1)[1].strip()
-                    break
-    except OSError:  # pragma: no cover
         pass
     return out
 
