@@ -74,29 +74,14 @@ interleaved round by round, and reported as medians over the rounds.</p>
                          ["diffraction_cost_ratio", head["diffraction_cost_ratio"]]], ["figure", "value"]))
     parts.append("<h2>Machine and versions</h2>" + _table([[k, v] for k, v in summary["machine"].items()], ["", ""]))
 
-    ps = res.get("point_search")
-    if ps:
-        parts += _point_search_section(ps, summary["figures"])
-
-    sp = res.get("sionna_paths")
-    if sp:
-        parts += _sionna_paths_section(sp, summary["figures"])
-
-    to = res.get("tradeoff")
-    if to:
-        parts += _tradeoff_section(to, summary["figures"])
-
-    sc = res.get("scaling")
-    if sc:
-        parts += _scaling_section(sc, summary["figures"])
-
-    dc = res.get("diffraction_cost")
-    if dc:
-        parts += _diffraction_cost_section(dc, summary["figures"])
-
-    sk = res.get("skips")
-    if sk:
-        parts += _skips_section(sk)
+    sections = (("point_search", _point_search_section), ("sionna_paths", _sionna_paths_section),
+                ("tradeoff", _tradeoff_section), ("scaling", _scaling_section),
+                ("diffraction_cost", _diffraction_cost_section))
+    for key, section in sections:  # the benchmarks that ran, in order
+        if res.get(key):
+            parts += section(res[key], summary["figures"])
+    if res.get("skips"):
+        parts += _skips_section(res["skips"])
 
     mu = res.get("munich")
     if mu:
