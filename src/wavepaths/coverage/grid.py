@@ -214,7 +214,7 @@ class MeshGrid:
     def from_file(cls, path: str, offset: float = 0.0, up_axis: str = "auto") -> "MeshGrid":
         """A measurement mesh from a mesh file (OBJ, PLY, STL, glTF/GLB, OFF), read and turned
         to +Z up as :func:`wavepaths.scene.load_scene` reads a scene (``up_axis``: glTF is
-        +Y up; OBJ faces split exactly), so that it lies where the scene does."""
+        +Y up; OBJ, PLY and OFF faces split exactly), so that it lies where the scene does."""
         import os
 
         import trimesh
@@ -230,6 +230,11 @@ class MeshGrid:
 
                 obj = read_obj(path)
                 vertices, faces = obj.vertices, obj.triangles
+            elif ext in (".ply", ".off"):
+                from ..scene.obj_reader import polygon_triangles
+                from ..scene.ply_off_reader import read_off, read_ply
+
+                vertices, faces = polygon_triangles(path, read_ply(path) if ext == ".ply" else read_off(path))
             else:
                 mesh = trimesh.load(path, process=False, force="mesh")
                 vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(getattr(mesh, "faces", []))

@@ -2,11 +2,12 @@
 
 Two corrections to what trimesh returns for plain mesh files (docs/scenes.md):
 
-* OBJ faces of four or more vertices: trimesh splits every face into a fan from its first
-  vertex, which covers area outside a concave face (an L-shaped roof gains the square
-  that closes the L). Faces whose fan would leave the face are split by ear clipping in
-  the face's plane instead (:mod:`wavepaths.scene.obj_faces`); faces that are not planar
-  are split too, with a warning. The XML reader keeps the fans, since Mitsuba 3 (and so
+* OBJ, PLY and OFF faces of four or more vertices: trimesh splits every face into a fan
+  from its first vertex, which covers area outside a concave face (an L-shaped roof gains
+  the square that closes the L). These files are read here (:mod:`~wavepaths.scene.obj_reader`,
+  :mod:`~wavepaths.scene.ply_off_reader`), and faces whose fan would leave the face are
+  split by ear clipping in the face's plane instead (:mod:`wavepaths.scene.obj_faces`);
+  faces that are not planar are split too, with a warning. The XML reader keeps the fans, since Mitsuba 3 (and so
   Sionna RT) makes them, and warns about concave faces.
 * glTF/GLB files are +Y up (glTF 2.0 specification); wavepaths, like Mitsuba and Sionna
   RT scenes, is +Z up: their geometry is rotated on load (``up_axis``).
@@ -28,7 +29,8 @@ from ..errors import SceneError, WavepathsError
 from .builtin import BUILTIN_SCENES, builtin_arrays
 from .mitsuba import read_mitsuba_xml
 from .model import Scene, WavepathsWarning, build_scene, external_stacklevel
-from .obj_reader import read_obj
+from .obj_reader import polygon_triangles, read_obj
+from .ply_off_reader import read_off, read_ply
 from .tolerances import SceneTolerances
 
 MESH_FORMATS = (".obj", ".ply", ".stl", ".gltf", ".glb", ".off")
@@ -130,9 +132,28 @@ def _read_obj_file(path: str, material: Material, tolerances: SceneTolerances | 
     return mesh.vertices, mesh.triangles, mesh.triangle_object, tmat, mesh.object_names, table
 
 
+def _read_polygon_file(path: str, ext: str, material: Material, tolerances: SceneTolerances | None):
+    """Scene arrays of a PLY or OFF file (:mod:`wavepaths.scene.ply_off_reader`): one object
+    named after the file, in ``material``."""
+    polygons = read_ply(path) if ext == ".ply" else read_off(path)
+    v, t = polygon_triangles(path, polygons, tolerances)
+    stem = os.path.splitext(os.path.basename(path))[0]
+    return v, t, np.zeros(len(t), np.int64), np.zeros(len(t), np.int64), (stem,), (material,)
+
+
 def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances | None = None,
                     up_axis: str = "auto", materials: Mapping[str, Material | str] | None = None):
     ext = os.path.splitext(path)[1].lower()
+    if ext in (".ply", ".off"):
+        try:
+            v, t, o, m, names, table = _read_polygon_file(path, ext, material, tolerances)
+        except (SceneError, WavepathsError):
+            raise
+        except Exception as exc:
+            raise SceneError(f"{path}: cannot read mesh ({exc})") from None
+        if _rotates_to_z_up(ext, up_axis):
+            v = v @ Y_UP_TO_Z_UP.T
+        return v, t, o, m, names, table
     if ext == ".obj":
         try:
             v, t, o, m, names, table = _read_obj_file(path, material, tolerances, materials)
@@ -228,7 +249,7 @@ def load_scene(
         Sionna RT reads them), the name of one of Sionna RT's scenes when sionna-rt is
         installed (``simple_street_canyon``, ``etoile``, ``munich``: its XML file), or a
         mesh file (OBJ, PLY, STL, glTF/GLB, OFF).
-        OBJ faces of four or more vertices are split into triangles that cover exactly
+        OBJ, PLY and OFF faces of four or more vertices are split into triangles that cover exactly
         the face, concave faces included (ear clipping; trimesh alone fans them); a face
         that is not planar is split too, with a :class:`WavepathsWarning`. In XML files
         they are split as Mitsuba 3 splits them (a fan from the first vertex), with a

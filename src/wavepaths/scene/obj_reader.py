@@ -32,6 +32,7 @@ import trimesh
 
 from ..errors import SceneError
 from .model import WavepathsWarning, external_stacklevel
+from .ply_off_reader import PolygonFile
 from .obj_faces import fan_doubled_areas, fan_is_valid, polygon_planes, triangulate_polygon
 from .tolerances import SceneTolerances
 
@@ -122,10 +123,11 @@ def _statements(lines: list[str]):
         carry, first = "", 0
 
 
-def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: list[int], statements: list[str],
-                 tolerances: SceneTolerances, warn: bool) -> tuple[list[np.ndarray], list[ConcaveFace]]:
+def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: list[int], statements,
+                 tolerances: SceneTolerances, warn: bool, unit: str = "line") -> tuple[list[np.ndarray], list[ConcaveFace]]:
     """Triangles ``(t_i, 3)`` of vertex indices for each face (see the module docstring), and
-    the concave faces (whose fan leaves them)."""
+    the concave faces (whose fan leaves them). ``lines[f]``: where face ``f`` is in the file
+    (a ``unit``: line or face number); ``statements(f)``: its text, for messages."""
     out: list[np.ndarray] = [np.zeros((0, 3), np.int64)] * len(faces)
     concave: list[tuple[int, ConcaveFace]] = []
     by_count: dict[int, list[int]] = {}
@@ -154,7 +156,7 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
             out[fs[r]] = fan[r]
         doubled, longest = fan_doubled_areas(planes.uv)
         for r in np.flatnonzero(valid & np.any(doubled < -eps * longest, axis=1)):  # the fan leaves the face
-            concave.append((fs[r], ConcaveFace(lines[fs[r]], _short(statements[fs[r]]), float(planes.area[r]),
+            concave.append((fs[r], ConcaveFace(lines[fs[r]], _short(statements(fs[r])), float(planes.area[r]),
                                                float(np.abs(doubled[r]).sum() / 2))))
         for r in np.flatnonzero(~good):
             f = fs[r]
@@ -163,7 +165,7 @@ def _split_faces(path: str, verts: np.ndarray, faces: list[list[int]], lines: li
             if not clean:
                 tangled.append(f)
     if warn:
-        _warn_bent_and_tangled(path, bent, tangled, flat, lines, statements)
+        _warn_bent_and_tangled(path, bent, tangled, flat, lines, statements, unit)
     return out, [c for _, c in sorted(concave, key=lambda fc: fc[0])]
 
 
@@ -172,12 +174,12 @@ def _short(statement: str, limit: int = 60) -> str:
 
 
 def _warn_bent_and_tangled(path: str, bent: list[tuple[float, int]], tangled: list[int], flat: float,
-                           lines: list[int], statements: list[str]) -> None:
+                           lines: list[int], statements, unit: str = "line") -> None:
     if bent:
         dev, f = max(bent)
         warnings.warn(
             f"{path}: {len(bent)} face(s) of four or more vertices are not planar (up to {dev:.3g} m from their "
-            f"mean plane, more than {flat:.3g} m, at line {lines[f]}: {statements[f][:60]!r}); wavepaths splits "
+            f"mean plane, more than {flat:.3g} m, at {unit} {lines[f]}: {statements(f)[:60]!r}); wavepaths splits "
             "each into triangles (a fan from its first vertex, or ear clipping in its mean plane when the fan "
             "would leave the face), one of several surfaces these vertices bound: split such faces in the file",
             WavepathsWarning, stacklevel=external_stacklevel(),
@@ -185,8 +187,8 @@ def _warn_bent_and_tangled(path: str, bent: list[tuple[float, int]], tangled: li
     if tangled:
         f = tangled[0]
         warnings.warn(
-            f"{path}: {len(tangled)} face(s) are not simple polygons (edges crossing, e.g. line {lines[f]}: "
-            f"{statements[f][:60]!r}); their triangles cover another region than intended",
+            f"{path}: {len(tangled)} face(s) are not simple polygons (edges crossing, e.g. {unit} {lines[f]}: "
+            f"{statements(f)[:60]!r}); their triangles cover another region than intended",
             WavepathsWarning, stacklevel=external_stacklevel(),
         )
 
@@ -240,13 +242,36 @@ def read_obj(path: str, tolerances: SceneTolerances | None = None, warn: bool = 
     if not faces:
         raise SceneError(f"{path}: the mesh has no faces")
     vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
-    split, concave = _split_faces(path, vertices, faces, face_line, face_text, tolerances or SceneTolerances(), warn)
+    split, concave = _split_faces(path, vertices, faces, face_line, face_text.__getitem__,
+                                  tolerances or SceneTolerances(), warn)
     counts = np.array([len(t) for t in split])
     t = np.concatenate(split)
     used, inverse = np.unique(t, return_inverse=True)
     return ObjMesh(vertices[used], inverse.reshape(-1, 3).astype(np.int64),
                    np.repeat(np.asarray(face_object, np.int64), counts), tuple(objects),
                    np.repeat(np.asarray(face_material, np.int64), counts), tuple(materials), tuple(concave))
+
+
+def polygon_triangles(path: str, polygons: "PolygonFile", tolerances: SceneTolerances | None = None,
+                      warn: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices, triangles)`` of the faces of a PLY or OFF file
+    (:class:`~wavepaths.scene.ply_off_reader.PolygonFile`), split as OBJ faces are (a fan
+    where it stays inside the face, ear clipping where it would not; bent and tangled faces
+    named in a warning). Only the vertices the faces use are kept, in index order.
+    """
+    if np.all(polygons.counts == 3):
+        t = polygons.indices.reshape(-1, 3)
+    else:
+        faces = polygons.faces()
+
+        def describe(f: int) -> str:
+            return f"{len(faces[f])} vertices: " + " ".join(map(str, faces[f]))
+
+        split, _ = _split_faces(path, polygons.vertices, faces, polygons.places.tolist(), describe,
+                                tolerances or SceneTolerances(), warn, polygons.unit)
+        t = np.concatenate(split)
+    used, inverse = np.unique(t, return_inverse=True)
+    return polygons.vertices[used], inverse.reshape(-1, 3).astype(np.int64)
 
 
 def concave_obj_faces(path: str, tolerances: SceneTolerances | None = None) -> list[ConcaveFace]:
