@@ -122,3 +122,29 @@ def test_a_reflection_off_the_wedges_own_face_is_named():
     sn = _sionna_paths(rows, depth=2)
     reasons = [_explain_sionna_only(scene, sn, i) for i in range(len(rows))]
     assert reasons == [SIONNA_ONLY_OWN_FACE, SIONNA_ONLY_FAILURE, SIONNA_ONLY_OWN_FACE]
+
+
+def test_a_matched_path_of_zero_amplitude_is_a_gain_violation():
+    # a coefficient that collapsed to 0 in one engine: an infinite gain difference, which the
+    # report's rule counts (it skipped it as NaN) and the summary counts as not finite
+    from wavepaths.validation.compare import _gain_diff_db
+    from wavepaths.validation.report import TOLERANCES, gain_violation
+
+    scene = load_scene("box_on_ground")
+    tx, rx = np.array([0.0, -20.0, 10.0]), np.array([3.0, -15.0, 2.0])
+    wp = trace(scene, tx[None], rx[None], TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0))
+    d = int(np.nonzero((wp.interactions[:, 0] == 2) & (wp.depth == 1))[0][0])
+    sn = _sionna_paths([(wp.vertices[d, :3], [2], [0])])
+    a = compute_fields(scene, wp, FieldConfig(3.5e9)).a.copy()
+    tol = TOLERANCES["gain_db_diffraction_compat"]
+    sn.a[:] = a[d]
+    (m,) = compare_paths(wp, a, sn).matches
+    assert abs(m.gain_diff_db) < 1e-12 and not gain_violation(m.gain_diff_db, tol)
+    a[d] = 0.0
+    comp = compare_paths(wp, a, sn)
+    (m,) = comp.matches
+    assert m.gain_diff_db == -np.inf and gain_violation(m.gain_diff_db, tol)
+    assert comp.summary()["gain_diff_db"] == {"max": None, "median": None, "non_finite": 1}
+    assert gain_violation(float("nan"), tol) and gain_violation(tol * 1.001, tol) and not gain_violation(-tol, tol)
+    assert _gain_diff_db(0.0, 0.0) == 0.0 and _gain_diff_db(1.0, 0.0) == np.inf
+    assert np.isnan(_gain_diff_db(np.nan, 1.0)) and _gain_diff_db(10.0, 1.0) == 20.0

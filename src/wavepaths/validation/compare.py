@@ -49,10 +49,14 @@ class Comparison:
 
     def summary(self) -> dict:
         def stats(values, kind_filter=None):
-            v = np.array([x for x in values if np.isfinite(x)])
+            # the extremes over the finite values, and how many were not finite (a path of
+            # amplitude 0 on one side only: an infinite gain difference; a NaN amplitude)
+            values = np.asarray(list(values), float)
+            v = values[np.isfinite(values)]
+            bad = int(len(values) - len(v))
             if len(v) == 0:
-                return {"max": None, "median": None}
-            return {"max": float(np.max(np.abs(v))), "median": float(np.median(np.abs(v)))}
+                return {"max": None, "median": None, "non_finite": bad}
+            return {"max": float(np.max(np.abs(v))), "median": float(np.median(np.abs(v))), "non_finite": bad}
 
         by_kind: dict[str, dict] = {}
         for m in self.matches:
@@ -72,6 +76,19 @@ class Comparison:
             "only_wavepaths_reasons": _count(r["reason"] for r in self.only_wavepaths),
             "only_sionna_reasons": _count(r["reason"] for r in self.only_sionna),
         }
+
+
+def _gain_diff_db(gw: float, gs: float) -> float:
+    """``20 log10(gw / gs)`` [dB] of two amplitudes' moduli: 0 where both are 0 (the same
+    path, no field on either side), +-inf where only one is, NaN where either is NaN, so that
+    a coefficient that collapsed to 0 in one engine is a difference, never dropped."""
+    if np.isnan(gw) or np.isnan(gs):
+        return float("nan")
+    if gw == 0.0 and gs == 0.0:
+        return 0.0
+    if gw == 0.0 or gs == 0.0:
+        return float("inf") if gs == 0.0 else float("-inf")
+    return float(20 * np.log10(gw / gs))
 
 
 def _count(items) -> dict:
@@ -140,7 +157,7 @@ def compare_paths(
                     Match(
                         t, r, k, i, j, float(cost[a, b]),
                         float((sn.tau[j] * SPEED_OF_LIGHT - length) / length),
-                        float(20 * np.log10(gw / gs)) if gw > 0 and gs > 0 else float("nan"),
+                        _gain_diff_db(gw, gs),
                         float(np.angle(wp_a[i] / sn.a[j])) if gw > 0 and gs > 0 else float("nan"),
                     )
                 )

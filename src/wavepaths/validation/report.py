@@ -60,6 +60,13 @@ TOLERANCES = {"delay_rel": 1e-6, "gain_db_los_reflection": 0.1, "gain_db_diffrac
               **EXACT_TOLERANCES}
 
 
+def gain_violation(gain_diff_db: float, tol_db: float) -> bool:
+    """Whether a matched path's gain difference [dB] breaks the tolerance ``tol_db``: beyond
+    it, and also where it is not a number, +-inf (an amplitude of 0 in one engine only) or NaN
+    (a NaN amplitude). A coefficient that collapsed to 0 is a failure, never skipped."""
+    return not abs(gain_diff_db) <= tol_db
+
+
 def _scene_file(case: Case, out_dir: str) -> str:
     if case.scene.startswith("sionna:"):
         from .sionna_runner import builtin_scene_path
@@ -129,7 +136,7 @@ def run_case(case: Case, out_dir: str) -> dict:
             if abs(mm.delay_rel_error) > TOLERANCES["delay_rel"]:
                 violations.append(f"delay {mm.kinds} rx {mm.rx}: {mm.delay_rel_error:.2e}")
             tol = TOLERANCES["gain_db_diffraction_compat"] if "D" in mm.kinds else TOLERANCES["gain_db_los_reflection"]
-            if np.isfinite(mm.gain_diff_db) and abs(mm.gain_diff_db) > tol:
+            if gain_violation(mm.gain_diff_db, tol):
                 if wedge == MATCHED_NON_MANIFOLD_EDGE:
                     # three or more faces of one mesh on the edge; Sionna's wedge is one pair of them
                     # (known disagreement 'non-manifold-edge-wedge')
