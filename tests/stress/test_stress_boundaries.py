@@ -104,6 +104,33 @@ def test_total_field_is_continuous_within_1e9_rad_of_a_boundary(name, tx, kind, 
         assert abs(t[0] - t[1]) <= CONTINUITY * abs(t).max(), (pol, t, abs(t[0] - t[1]) / abs(t).max())
 
 
+SWITCH_DELTA = 1e-7  # [rad] beyond the search's float margins: the GO path set differs on the two sides
+SWITCH_CONTINUITY = 1e-4  # (k rho + sqrt(k L)) 2 delta ~ 4e-5 relative at k rho ~ 200
+
+
+@pytest.mark.parametrize("rho", [3.0, 40.0])
+@pytest.mark.parametrize("name, tx, kind", case_params())
+def test_total_field_is_continuous_where_the_geometrical_optics_set_switches(name, tx, kind, rho):
+    """The test above may see both receivers on one side of the search's decision (within its
+    float margin of the boundary), where continuity holds whatever the diffracted field's
+    jump. Here, 1e-7 rad either side, the GO path set must differ between the two receivers
+    and the diffracted field must jump by the opposite amount: the total stays continuous to
+    the smooth field's own change (tolerance 1e-4 of the total; a wrong sign of a face's
+    reflection in the diffraction leaves a jump of about twice the reflected field)."""
+    scene = SCENES[name]()
+    tx = np.array([tx])
+    b = boundary_direction(tx[0], kind)
+    rx = np.array([rho * rotate_yz(b, s * SWITCH_DELTA) for s in (-1, 1)])
+    for pol in ("V", "H"):
+        t, p, f = total_field(scene, tx, rx, OPTS, pol)
+        go = go_mask(p)
+        counts = np.bincount(p.rx_index[go], minlength=2)
+        assert counts[0] != counts[1], (pol, counts)  # the boundary is crossed
+        dif = per_receiver(p, f.a_phased, 2, ~go)
+        assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
+        assert abs(t[0] - t[1]) <= SWITCH_CONTINUITY * abs(t).max(), (pol, t, abs(t[0] - t[1]) / abs(t).max())
+
+
 # Receivers placed exactly on a boundary with integer coordinates, so that the float64
 # offset of the boundary computes to exactly 0 (the UTD term is then the mean of its
 # one-sided limits while the search keeps or drops the GO path). The value must be the
@@ -129,6 +156,9 @@ def test_total_field_exactly_on_a_boundary_is_the_limit_from_both_sides(name, tx
     for pol in ("V", "H"):
         t, p, f = total_field(scene, tx, pts, OPTS, pol)
         assert abs(t[1] - 0.5 * (t[0] + t[2])) <= 1e-5 * abs(t).max(), (pol, t)
+        # and the two sides agree: a smooth field moves by about (k rho) 2e-6 ~ 4e-4 over them
+        # (8.9e-4 measured at most); a jump of the total is O(1)
+        assert abs(t[0] - t[2]) <= 2e-3 * abs(t).max(), (pol, t)
         dif = per_receiver(p, f.a_phased, 3, ~go_mask(p))
         assert abs(dif[0] - dif[2]) > 0.1 * abs(t).max()  # a boundary indeed
 

@@ -210,10 +210,13 @@ def test_kp_coefficient_is_reciprocal(a):
 @given(floats(1.05, 2.0), floats(0.05, 1.0), st.sampled_from([1, 2, 3, 4]), floats(0.05, np.pi - 0.05),
        floats(-2, 4), floats(0.1, 100.0), st.sampled_from(["soft", "hard"]))
 def test_utd_jump_across_each_boundary_cancels_the_geometrical_optics_jump(n, frac, which, beta_0, log_kl, L, pol):
-    """Across each shadow or reflection boundary (1e-10 rad either side) the coefficient jumps by
-    ``sqrt(L) / sin(beta_0)`` times a real unit (the reflection coefficient -1/+1 or 1): with
-    the spherical-wave spreading this is exactly the jump of the GO field, which makes the total
-    field continuous (KP 1974). Tolerance 1e-6 (the smooth part moves by ~1e-10 sqrt(kL))."""
+    """Across each shadow or reflection boundary (1e-10 rad either side, phi increasing) the
+    coefficient jumps by ``sqrt(L) / sin(beta_0)`` times minus the jump of the GO field there,
+    which makes the total field continuous (KP 1974). Going up in phi, the GO field gains the
+    incident wave at ``phi' - pi`` (jump +1, so z = -1), loses it at ``phi' + pi`` (z = +1),
+    gains the n-face reflection at ``(2n - 1) pi - phi'`` (z = -R) and loses the 0-face one at
+    ``pi - phi'`` (z = +R), with R = -1 soft and +1 hard on a perfect conductor. Tolerance 1e-6
+    (the smooth part moves by ~1e-10 sqrt(kL))."""
     npi = n * np.pi
     phi_p = frac * npi
     phi_b = {1: phi_p - np.pi, 2: phi_p + np.pi, 3: (2 * n - 1) * np.pi - phi_p, 4: np.pi - phi_p}[which]
@@ -226,7 +229,9 @@ def test_utd_jump_across_each_boundary_cancels_the_geometrical_optics_jump(n, fr
     hi = kp_coefficients(phi_b + d, phi_p, beta_0, n, k, L)
     i = 0 if pol == "soft" else 1
     z = (hi[i] - lo[i]) * np.sin(beta_0) / np.sqrt(L)
-    assert abs(abs(z.real) - 1) <= 1e-6 and abs(z.imag) <= 1e-6, z
+    r = -1.0 if pol == "soft" else 1.0
+    expected = {1: -1.0, 2: 1.0, 3: -r, 4: r}[which]
+    assert abs(z - expected) <= 1e-6, (z, expected)
 
 
 @SETTINGS
