@@ -41,7 +41,8 @@ def keller_coefficients(
 
     It diverges on the shadow and reflection boundaries: there a denominator smaller than
     ``denominator_floor`` in magnitude is replaced by ``+-denominator_floor``, so the result
-    is huge (~1/denominator_floor) but finite. Vanishes for ``n = 1``.
+    is huge (~1/denominator_floor) but finite. It tends to 0 as ``n -> 1`` (the wedge
+    becomes a plane); ``n = 1`` itself is refused, as by every coefficient here.
 
     Returns
     -------
@@ -76,7 +77,11 @@ def seed_keller_coefficient(
 
     ``delta``, ``alpha``: diffracted and incident directions measured from the *normal* of
     the incident face, so ``delta = phi - pi/2``, ``alpha = phi' - pi/2``; ``C = -1`` is
-    Keller's soft and ``C = +1`` his hard coefficient. The result equals
+    Keller's soft and ``C = +1`` his hard coefficient. (The seed calls ``C = +1`` its
+    ``D_par`` and ``C = -1`` its ``D_perp``: its "parallel" is the hard case, E perpendicular
+    to the edge and H along it, which acts on the edge-fixed ``phi`` component. Feeding
+    :func:`wavepaths.em.polarization.seed_diffracted_coherence`, whose ``d_par`` acts on the
+    ``beta_0`` component, takes the seed's ``D_perp`` as ``d_par``.) The result equals
     ``Re(e^{j pi/4} D_Keller) / sqrt(2)``: Keller's value without its ``e^{-j pi/4}`` phase
     and a factor ``1/sqrt(2)`` smaller in magnitude. No floor: it is infinite on boundaries.
     """

@@ -368,7 +368,10 @@ def seed_diffracted_coherence(
 
     ``J_dif = [[J_xx D_par^2, J_xy D_par D_perp], [J_yx D_par D_perp, J_yy D_perp^2]]``
     with ``x`` the parallel (edge-fixed ``beta``) and ``y`` the perpendicular
-    (``phi``) component. It equals ``propagate_coherence(diag(D_par, D_perp), J)``
+    (``phi``) component: ``d_par`` is the soft coefficient ``D_s`` and ``d_perp`` the hard
+    ``D_h``. The seed's own labels are the other way round: its ``D_par`` (``C = +1``) is
+    Keller's hard coefficient (:func:`wavepaths.em.gtd.seed_keller_coefficient`), so its
+    ``D_perp`` goes in as ``d_par`` and its ``D_par`` as ``d_perp``. It equals ``propagate_coherence(diag(D_par, D_perp), J)``
     for REAL coefficients only; the UTD coefficients are complex in general, and then
     the correct form is ``M J M^H`` (diagonal ``|D|^2``, off-diagonal
     ``D_par conj(D_perp)``), so complex input is refused here.
