@@ -67,6 +67,7 @@ def test_boundary_conditions_and_edge_value() -> None:
         assert np.all(np.abs(d) < 2 * h * (1 + k_rho) ** 2)  # one-sided difference: O(h (k rho)^2)
     # At the edge the hard field is 1 (continuous, as U(0, psi) = 1/2), the soft field 0.
     assert abs(halfplane_plane_wave(0.0, 1.0, pp, "hard") - 1) < 1e-15
+    assert abs(halfplane_plane_wave(0.0, 1.0, pp, "soft")) < 1e-15
 
 
 def _grid_with_boundaries(pp: float, n: float) -> np.ndarray:

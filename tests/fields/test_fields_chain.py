@@ -46,14 +46,23 @@ def test_pec_ground_cancels_tangential_field_at_the_surface():
     T = transfer_matrices(s, p, FieldConfig(frequency_hz=1e9))
     from wavepaths.em.polarization import spherical_unit_vectors
     k = 2 * np.pi * 1e9 / speed_of_light
+    direct = int(np.flatnonzero(p.depth == 0)[0])
+    vertical = []
     for pol in (0, 1):
         total = np.zeros(3, complex)
         for i in range(len(p)):
             b = spherical_unit_vectors(p.arrival_directions[i])
             e = T[i, 0, pol] * b.theta_hat + T[i, 1, pol] * b.phi_hat
-            total += e * np.exp(-1j * k * p.lengths[i])
-        # E_x, E_y vanish on a perfect conductor (to O(k h)); E_z doubles for the vertical part
+            e = e * np.exp(-1j * k * p.lengths[i])
+            total += e
+            if i == direct:
+                e_direct = e
+        # E_x, E_y vanish on a perfect conductor (to O(k h)); E_z doubles (the image's E_z equals
+        # the direct one's, to O(k h) in phase and h / r in amplitude)
         assert np.hypot(abs(total[0]), abs(total[1])) < 0.05 * np.abs(T[0, :, pol]).max()
+        assert abs(total[2] - 2 * e_direct[2]) < 0.05 * np.linalg.norm(e_direct)
+        vertical.append(abs(e_direct[2]) / np.linalg.norm(e_direct))
+    assert max(vertical) > 0.2  # one polarisation has a vertical part worth doubling
 
 
 def halfplane_total(s, tx, rx_pts, pol, freq, edge_dihedron):
