@@ -147,6 +147,27 @@ def test_compat_mode_reproduces_sionna_on_the_half_plane_line(quick_report):
             assert abs(sn["median_db"] - cp["median_db"]) < 0.1, (name, pol)
 
 
+def test_compat_mode_reproduces_sionna_point_by_point_on_the_half_plane_line(quick_report):
+    # point by point, as complex fields normalised to the incident one: median 0.014 and 90th
+    # percentile 0.08 measured (Sionna's float32 geometry and its sampled reflection points),
+    # beside the one listed exception at phi = 359 deg, where Sionna sees a line of sight
+    # through the screen (known disagreement 'sionna-los-skips-last-segment-fraction')
+    _, summary = quick_report
+    line = summary["lines"]["half_plane"]
+    phi = np.asarray(line["phi_deg"])
+    for pol in ("soft", "hard"):
+        c = line["curves"]
+        sn = np.asarray(c[f"Sionna RT ({pol})"]["re"]) + 1j * np.asarray(c[f"Sionna RT ({pol})"]["im"])
+        cp = (np.asarray(c[f"wavepaths compat=sionna ({pol})"]["re"])
+              + 1j * np.asarray(c[f"wavepaths compat=sionna ({pol})"]["im"]))
+        d = np.abs(sn - cp)
+        listed = phi == 359.0
+        assert d[listed].min() > 0.9, (pol, d[listed])  # the exception is still there (else drop it)
+        d = d[~listed]
+        assert np.median(d) < 0.03 and np.percentile(d, 90) < 0.15 and d.max() < 0.25, (
+            pol, np.median(d), np.percentile(d, 90), d.max(), phi[~listed][np.argmax(d)])
+
+
 def test_coverage_maps_of_both_engines_agree_on_the_street_canyon(quick_report):
     _, summary = quick_report
     cov = summary["coverage"]
@@ -157,6 +178,31 @@ def test_coverage_maps_of_both_engines_agree_on_the_street_canyon(quick_report):
     with_diff = cov["runs"]["diffraction"]
     assert with_diff["cells_compared"] >= no_diff["cells_compared"]  # diffraction lights the shadowed cells
     assert abs(with_diff["median_db"]) < 1.0
+
+
+@pytest.mark.xfail(strict=True, reason="known disagreement 'sionna-los-skips-last-segment-fraction' "
+                                        "(validation/known.py)")
+def test_known_sionna_sees_no_line_of_sight_through_a_screen_near_the_receiver(tmp_path):
+    # the half-plane line's transmitter 10 km away at phi' = 60 deg; the receiver 1 m from the
+    # edge at phi = 359 deg, behind the screen, which crosses the line of sight 2.0 cm before it
+    _sionna_or_skip()
+    from wavepaths.scene import load_scene, write_mitsuba_xml
+    from wavepaths.search import TraceOptions, trace
+    from wavepaths.validation.lines import S_PRIME, _geometry
+    from wavepaths.validation.sionna_runner import run_sionna_paths
+
+    scene = load_scene("half_plane")
+    xml = str(tmp_path / "half_plane.xml")
+    write_mitsuba_xml(scene, xml)
+    to_xyz, _, phi_p = _geometry("half_plane")
+    tx = S_PRIME * to_xyz(np.deg2rad(np.array([phi_p])))
+    rx = to_xyz(np.deg2rad(np.array([359.0])))
+    crossing = tx[0] + tx[0, 1] / (tx[0, 1] - rx[0, 1]) * (rx[0] - tx[0])
+    assert crossing[2] < 0 and np.linalg.norm(rx[0] - crossing) < 0.03  # the screen (z < 0) blocks the line
+    wp = trace(scene, tx, rx, TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=0))
+    assert not (wp.depth == 0).any()  # wavepaths: no line of sight
+    sn = run_sionna_paths(xml, tx, rx, frequency_hz=3.5e9, max_depth=1, diffraction=True, edge_diffraction=True)
+    assert not (sn.num_interactions == 0).any()
 
 
 @pytest.mark.xfail(strict=True, reason="known disagreement 'sionna-dr-depends-on-max-depth' (validation/known.py)")
