@@ -58,13 +58,13 @@ def outside_solids(scene: Scene, ctx: TxContext, paths: Paths, stats: Counter) -
     """``paths`` without those whose first leg enters a solid from a transmitter lying on its
     surface (:func:`wavepaths.search.on_faces.legs_into_solids`; the cells on a solid's
     surface are masked). The transmitters' faces are found once per context."""
-    from ..search.on_faces import legs_into_solids, solid_face_normals
+    from ..search.on_faces import legs_into_solids, solid_surface_cones
 
-    normals = ctx.derived.get("tx_solid_normals")
-    if normals is None:
-        normals = ctx.derived["tx_solid_normals"] = solid_face_normals(scene, ctx.tx)
-    if not normals:
+    cones = ctx.derived.get("tx_solid_cones")
+    if cones is None:
+        cones = ctx.derived["tx_solid_cones"] = solid_surface_cones(scene, ctx.tx)
+    if not cones:
         return paths
-    inward = legs_into_solids(paths, normals, {})
+    inward = legs_into_solids(paths, cones, {})
     stats["paths_dropped_into_solid"] = int(inward.sum())  # of the tile's last assembly (all its paths)
     return paths.select(~inward) if inward.any() else paths

@@ -10,6 +10,8 @@ block's faces reflect from inside, in one direction of travel only).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..scene.model import Scene
@@ -69,9 +71,108 @@ def points_on_surfaces(scene: Scene, points: np.ndarray, budget: int = BUDGET) -
     return out
 
 
-def solid_face_normals(scene: Scene, points: np.ndarray, budget: int = BUDGET) -> dict[int, np.ndarray]:
-    """For each point lying on faces of solid objects: ``{point: (k, 3) outward unit normals}``
-    of those faces (a point on a block's edge has two). Empty for points on no solid."""
+@dataclass(frozen=True)
+class SurfaceCone:
+    """The surface of one solid object around a point lying on it: the faces through the point.
+
+    Near the point the solid is a cone (its tangent cone), bounded by the faces' own cones:
+    a half-space on one face, a wedge on an edge (convex or reflex), a polyhedral cone at a
+    corner. :func:`SurfaceCone.into` tells the directions that enter it.
+
+    Attributes
+    ----------
+    normals : (k, 3) float64
+        Outward unit normals of the faces (polygons) the point lies on.
+    tri_face : (t,) int64
+        The face (row of ``normals``) of each triangle of those faces that holds the point.
+    edge_normals : (t, 3, 3) float64
+        Each such triangle's in-plane unit normals of its three sides, pointing into it.
+    edge_on : (t, 3) bool
+        Whether the point lies on each side's line (within the plane tolerance): the side
+        bounds the triangle's cone at the point.
+    reference : (3,) float64
+        A unit direction just outside the solid: into the first face's triangle, tilted
+        1e-3 rad off it along its outward normal.
+    """
+
+    normals: np.ndarray
+    tri_face: np.ndarray
+    edge_normals: np.ndarray
+    edge_on: np.ndarray
+    reference: np.ndarray
+
+    def _in_face_cone(self, face: int, w: np.ndarray) -> np.ndarray:
+        """(m,) bool: whether the in-plane directions ``w`` (m, 3) point into ``face``'s polygon."""
+        out = np.zeros(len(w), dtype=bool)
+        for t in np.flatnonzero(self.tri_face == face):
+            side = w @ self.edge_normals[t].T  # (m, 3): >= 0 on the triangle's side of each edge
+            out |= np.all((side >= -1e-12 * np.linalg.norm(w, axis=1)[:, None]) | ~self.edge_on[t][None, :], axis=1)
+        return out
+
+    def into(self, d: np.ndarray) -> np.ndarray:
+        """(m,) bool: whether the directions ``d`` (m, 3) from the point enter the solid.
+
+        Exact for the polyhedral cone: the segment from ``d`` to :attr:`reference` (both
+        seen from the point) crosses the faces' cones an odd number of times. A direction
+        within 1e-12 rad of a face's plane and pointing into that face runs along the
+        surface, the limit from outside: not into.
+        """
+        d = np.asarray(d, dtype=np.float64).reshape(-1, 3)
+        d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+        r = self.reference
+        crossings = np.zeros(len(d), dtype=np.int64)
+        along = np.zeros(len(d), dtype=bool)
+        for f, n in enumerate(self.normals):
+            sd, sr = d @ n, float(r @ n)
+            flat = np.abs(sd) <= 1e-12
+            if flat.any():
+                along[flat] |= self._in_face_cone(f, d[flat])
+            cross = ((sd < 0) & (sr > 0)) | ((sd > 0) & (sr < 0))
+            if cross.any():
+                tau = sd[cross] / (sd[cross] - sr)
+                w = d[cross] + tau[:, None] * (r[None, :] - d[cross])
+                w -= (w @ n)[:, None] * n[None, :]  # in the plane, to rounding
+                crossings[np.flatnonzero(cross)] += self._in_face_cone(f, w)
+        return (crossings % 2 == 1) & ~along
+
+
+def _surface_cone(scene: Scene, point: np.ndarray, polygons: np.ndarray, tol: float) -> SurfaceCone | None:
+    """The :class:`SurfaceCone` of one solid object at ``point`` from the ``polygons`` of it the
+    point lies on (their outward normals from ``scene.outward_sign``)."""
+    normals = scene.polygon_normal[polygons] * scene.outward_sign[polygons][:, None]
+    tri_face, edge_normals, edge_on, first = [], [], [], None
+    for f, q in enumerate(polygons):
+        n = normals[f]
+        for t in scene.polygon_triangles(int(q)):
+            v = scene.vertices[scene.triangles[t]]
+            sides = np.roll(v, -1, axis=0) - v  # side i from vertex i to i + 1
+            inward = np.cross(n, sides)  # in the plane, perpendicular to side i
+            inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-300)
+            toward = np.einsum("ij,ij->i", np.roll(v, -2, axis=0) - v, inward)  # the opposite vertex's side
+            inward *= np.where(toward < 0, -1.0, 1.0)[:, None]
+            dist = np.einsum("ij,ij->i", point[None, :] - v, inward)  # >= 0 inside the triangle
+            if np.all(dist >= -tol):
+                tri_face.append(f)
+                edge_normals.append(inward)
+                edge_on.append(dist <= tol)
+                if first is None:
+                    first = (f, v)
+    if first is None:
+        return None
+    # the reference: from the point toward its first triangle's centroid, 1e-3 rad off the face
+    f0, v0 = first
+    n0 = normals[f0]
+    w0 = v0.mean(axis=0) - point
+    w0 -= (w0 @ n0) * n0
+    ref = w0 / np.linalg.norm(w0) + 1e-3 * n0
+    return SurfaceCone(normals, np.asarray(tri_face, np.int64), np.asarray(edge_normals), np.asarray(edge_on),
+                       ref / np.linalg.norm(ref))
+
+
+def solid_surface_cones(scene: Scene, points: np.ndarray, budget: int = BUDGET) -> dict[int, list[SurfaceCone]]:
+    """For each point lying on faces of solid objects: ``{point: [SurfaceCone per solid]}``
+    (a point on the edge two touching blocks share lies on both). Empty for points on no solid."""
+    from ..raycast import plane_tolerance
     from ..scene.closed import solid_objects_mask
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -80,33 +181,40 @@ def solid_face_normals(scene: Scene, points: np.ndarray, budget: int = BUDGET) -
         return {}
     solid = solid_objects_mask(scene)[scene.polygon_object[q]] & (scene.outward_sign[q] != 0)
     i, q = i[solid], q[solid]
-    normals = scene.polygon_normal[q] * scene.outward_sign[q][:, None]
-    return {int(p): normals[i == p] for p in np.unique(i)}
+    tol = plane_tolerance(scene)
+    out: dict[int, list[SurfaceCone]] = {}
+    for p in np.unique(i):
+        mine = q[i == p]
+        for obj in np.unique(scene.polygon_object[mine]):
+            cone = _surface_cone(scene, points[p], mine[scene.polygon_object[mine] == obj], tol)
+            if cone is not None:
+                out.setdefault(int(p), []).append(cone)
+    return out
 
 
-def legs_into_solids(paths, tx_normals: dict[int, np.ndarray], rx_normals: dict[int, np.ndarray],
+def legs_into_solids(paths, tx_cones: dict[int, list[SurfaceCone]], rx_cones: dict[int, list[SurfaceCone]],
                      rx_offset: int = 0) -> np.ndarray:
-    """(N,) bool: paths whose first leg leaves a transmitter lying on a solid's face into the
+    """(N,) bool: paths whose first leg leaves a transmitter lying on a solid's surface into the
     solid, or whose last leg reaches a receiver lying on one from inside it.
 
     The occlusion rule lets a segment pass whose end lies on a face (docs/stress.md, "What
     blocks a segment"): from a point on a block's wall, a leg through the block crosses no face
-    in its interior. A leg from such an end is inside the solid when it points against the
-    outward normal of a face the end lies on by more than rounding (``d . n < -1e-12 |d|``);
-    a leg along the face is the limit from outside and stays. ``rx_offset``: the receivers'
-    index offset of ``paths`` (a coverage tile's).
+    in its interior. Whether a leg from such an end enters the solid is decided by the
+    solid's tangent cone at the end (:meth:`SurfaceCone.into`): on a face, against its outward
+    normal; on a convex edge or corner, against every face there (a leg from a roof's edge
+    over the street enters no block); on a reflex edge, against either. A leg along a face
+    is the limit from outside and stays. ``rx_offset``: the receivers' index offset of
+    ``paths`` (a coverage tile's).
     """
     bad = np.zeros(len(paths), dtype=bool)
-    if not tx_normals and not rx_normals or len(paths) == 0:
+    if not tx_cones and not rx_cones or len(paths) == 0:
         return bad
     rows = np.arange(len(paths))
     first = paths.vertices[:, 1] - paths.vertices[:, 0]
     back = paths.vertices[rows, paths.depth] - paths.vertices[rows, paths.depth + 1]  # from rx to the vertex before
-    for index, legs, normals_of in ((paths.tx_index, first, tx_normals), (paths.rx_index + rx_offset, back, rx_normals)):
-        for point, normals in normals_of.items():
+    for index, legs, cones_of in ((paths.tx_index, first, tx_cones), (paths.rx_index + rx_offset, back, rx_cones)):
+        for point, cones in cones_of.items():
             on = np.nonzero(index == point)[0]
-            if len(on):
-                d = legs[on]
-                size = np.sqrt(np.einsum("ij,ij->i", d, d))
-                bad[on] |= ((d @ normals.T) < -1e-12 * size[:, None]).any(axis=1)
+            for cone in cones if len(on) else ():
+                bad[on] |= cone.into(legs[on])
     return bad

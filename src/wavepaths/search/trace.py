@@ -29,7 +29,7 @@ from ..scene.model import Scene
 from . import kernels
 from .context import TxContext, build_tx_context
 from .launched import prepare_launched
-from .on_faces import legs_into_solids, points_on_faces, points_on_surfaces, solid_face_normals
+from .on_faces import legs_into_solids, points_on_faces, points_on_surfaces, solid_surface_cones
 from .options import TraceOptions
 from .paths import Paths, assemble
 from .tile import trace_tile
@@ -227,7 +227,7 @@ def trace(
             progress(min(len(rx), s + size))
     paths = assemble(tx, rx, batches, dict(stats), merge_tol=scene.length_tolerance(scene.tolerances.weld))
     if (tx_face >= 0).any() or (rx_face >= 0).any():  # ends on faces: legs through a solid they lie on
-        inward = legs_into_solids(paths, _normals_of(scene, tx, tx_face), _normals_of(scene, rx, rx_face))
+        inward = legs_into_solids(paths, _cones_of(scene, tx, tx_face), _cones_of(scene, rx, rx_face))
         if inward.any():
             stats["paths_dropped_into_solid"] = int(inward.sum())
             paths = paths.select(~inward)
@@ -235,8 +235,8 @@ def trace(
     return paths
 
 
-def _normals_of(scene: Scene, points: np.ndarray, face: np.ndarray) -> dict[int, np.ndarray]:
-    """:func:`~wavepaths.search.on_faces.solid_face_normals` of the points on a face, by their rows."""
+def _cones_of(scene: Scene, points: np.ndarray, face: np.ndarray) -> dict:
+    """:func:`~wavepaths.search.on_faces.solid_surface_cones` of the points on a face, by their rows."""
     rows = np.nonzero(face >= 0)[0]
-    found = solid_face_normals(scene, points[rows])
-    return {int(rows[i]): n for i, n in found.items()}
+    found = solid_surface_cones(scene, points[rows])
+    return {int(rows[i]): c for i, c in found.items()}
