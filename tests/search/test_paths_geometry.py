@@ -353,3 +353,14 @@ def test_path_lengths_are_computed_once_read_only_and_not_pickled():
     np.testing.assert_array_equal(back.lengths, paths.lengths)
     assert not back.lengths.flags.writeable and not back.segment_lengths.flags.writeable
     assert len(back.select(back.depth > 0).lengths) == int((paths.depth > 0).sum())
+
+
+def test_azimuths_are_in_the_documented_half_open_range():
+    # a line of sight along +x arrives from -x: azimuth +pi, not -pi (the negated direction's
+    # y component is -0.0); departure along +x: 0 (docs/antennas.md: azimuth in (-pi, pi])
+    s = load_scene("street_canyon")
+    p = trace(s, np.array([[-60.0, 0.0, 10.0]]), np.array([[20.0, 0.0, 10.0]]),
+              TraceOptions(max_reflections=0, diffraction=False))
+    (zd, ad), (za, aa) = p.angles_of_departure, p.angles_of_arrival
+    assert len(p) == 1 and ad[0] == 0.0 and aa[0] == np.pi
+    assert zd[0] == za[0] == np.pi / 2

@@ -142,7 +142,8 @@ class Paths:
 
     @staticmethod
     def _zenith_azimuth(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1], d[:, 0])
+        # azimuth in (-pi, pi]: a -0.0 y component (a wave along -x negated) gives +pi, not -pi
+        return np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1] + 0.0, d[:, 0])
 
     @property
     def angles_of_departure(self) -> tuple[np.ndarray, np.ndarray]:
