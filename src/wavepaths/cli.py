@@ -221,7 +221,7 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
                    help="with --diffraction-candidates launched: Keller-cone directions per turn (default 256)")
     p.add_argument("--reflection-candidates", choices=["exhaustive", "launched"], default="exhaustive",
                    help="specular candidates: every chain whose beam reaches the receiver (default; complete), or "
-                        "those that transmitter rays carry to it (dense cities; may miss a path)")
+                        "those that transmitter rays carry to it (dense cities; may miss a path; one --tx only)")
     p.add_argument("--launch-rays", type=int, default=1 << 21,
                    help="with --reflection-candidates launched: rays from the transmitter (default 2097152)")
 
