@@ -7,6 +7,11 @@ kink: a wedge of exterior angle 180.1 degrees (n = 1.00056), whose diffraction n
 Sionna RT 2.2 builds its wedge from one pair of the mesh's half-edges, one block's own
 right-angled corner (n = 1.5), and diffracts tens of dB more. The exact PEC wedge solution
 (Macdonald's series) for the true exterior angle decides: wavepaths matches it.
+
+The exact references take nothing from the engine: n, phi, phi', beta_0, the diffraction point and
+the distances s', s come from the scene's construction (the corner edge is the z axis, block A's
+facade runs along -x with free space at -y, the kink is KINK) and the explicit TX and RX
+(:func:`reference_geometry`), not from ``wedge_geometry`` or the traced path.
 """
 
 from __future__ import annotations
@@ -54,6 +59,35 @@ def _corner_dihedron(scene) -> int:
     on = np.nonzero((np.linalg.norm(dih.origin[:, :2], axis=1) < 1e-9) & (np.abs(dih.direction[:, 2]) > 0.999))[0]
     assert len(on) == 1
     return int(on[0])
+
+
+def reference_geometry(tx: np.ndarray, rx: np.ndarray) -> dict:
+    """The diffraction at the corner edge from the scene's construction alone.
+
+    The edge is the z axis, e = +z. Block A's facade (y = 0, x < 0) is the 0-face: from the
+    edge into it is t0 = -x and its normal into free space is n0 = -y; (t0, n0, e) is
+    right-handed ((-x) x (-y) = +z) as docs/conventions.md requires, and angles are measured
+    about e from t0 toward n0, in the plane perpendicular to the edge. Block B's facade, turned
+    by KINK, is then at phi = pi + KINK = n pi. The same labelling is block A's own right-angled
+    corner (its other face, x = 0, at phi = 3 pi / 2 behind the party wall). The diffraction
+    point Q is where the unfolded path TX -> Q -> RX is straight (Keller's law).
+    """
+    e, t0, n0 = np.array([0.0, 0.0, 1.0]), np.array([-1.0, 0.0, 0.0]), np.array([0.0, -1.0, 0.0])
+
+    def along_and_radial(p):
+        return float(p @ e), float(np.linalg.norm(p - (p @ e) * e))
+
+    (t_tx, r_tx), (t_rx, r_rx) = along_and_radial(tx), along_and_radial(rx)
+    q = (t_tx * r_rx + t_rx * r_tx) / (r_tx + r_rx) * e
+
+    def angle(p):
+        v = p - q
+        return float(np.mod(np.arctan2(v @ n0, v @ t0), 2 * np.pi))
+
+    s_in, s_out = float(np.linalg.norm(q - tx)), float(np.linalg.norm(rx - q))
+    beta_0 = float(np.arccos(np.clip((q - tx) @ e / s_in, -1.0, 1.0)))
+    return {"q": q, "phi_prime": angle(tx), "phi": angle(rx), "beta_0": beta_0, "n": 1.0 + KINK / np.pi,
+            "s_in": s_in, "s_out": s_out}
 
 
 def exact_soft_coefficient(k_l: float, phi: float, phi_prime: float, n: float) -> complex:
@@ -115,13 +149,15 @@ def test_sionna_diffracts_on_one_blocks_corner_where_the_exact_solution_sees_a_f
         assert m.gain_diff_db < -20.0  # Sionna's coefficient is more than 20 dB stronger
 
         # |a| of the exact solution for the true wedge (soft: vertical edge, V-polarised isotropic
-        # antennas, broadside): (lambda / 4 pi) |D| / sqrt(s s' (s + s')), D at L = s s' / (s + s')
-        g = wedge_geometry(scene, paths, np.array([i]), 0)
-        phi, phi_prime, n = float(g["phi"][0]), float(g["phi_prime"][0]), float(g["n"][0])
-        assert abs(n - (1 + KINK / np.pi)) < 1e-9 and abs(g["beta_0"][0] - np.pi / 2) < 1e-9
-        s_in, s_out = paths.segment_lengths[i][:2]
+        # antennas, broadside): (lambda / 4 pi) |D| / sqrt(s s' (s + s')), D at L = s s' / (s + s');
+        # the geometry from the scene's construction, not from the engine
+        ref = reference_geometry(TX[0], RX[m.rx])
+        phi, phi_prime, n = ref["phi"], ref["phi_prime"], ref["n"]
+        assert abs(ref["beta_0"] - np.pi / 2) < 1e-9  # TX, RX and Q at one height
+        assert 0.0 < phi < n * np.pi and 0.0 < phi_prime < n * np.pi  # both in front of the facades
+        s_in, s_out = ref["s_in"], ref["s_out"]
         spreading = 1.0 / np.sqrt(s_in * s_out * (s_in + s_out))
-        k_l = K * s_in * s_out / (s_in + s_out)
+        k_l = K * s_in * s_out / (s_in + s_out) * np.sin(ref["beta_0"]) ** 2
         a_exact = lam / (4 * np.pi) * abs(exact_soft_coefficient(k_l, phi, phi_prime, n)) / np.sqrt(K) * spreading
 
         def db(x):
@@ -135,9 +171,12 @@ def test_sionna_diffracts_on_one_blocks_corner_where_the_exact_solution_sees_a_f
         # Sionna does not: its |a| is 20 to 50 dB above the exact value ...
         assert db(sn.a[j]) - db(a_exact) > 20.0
         # ... and within 3 dB of the exact coefficient of a right-angled corner (block A's:
-        # 0-face A's facade, free space 270 degrees), the wedge of one block's own faces
-        phi_a = np.mod(np.arctan2(*(paths.vertices[i, 2, 1::-1])) - np.pi, 2 * np.pi)
-        phi_prime_a = np.mod(np.arctan2(*(paths.vertices[i, 0, 1::-1])) - np.pi, 2 * np.pi)
-        a_corner = (lam / (4 * np.pi) * abs(exact_soft_coefficient(k_l, phi_a, phi_prime_a, 1.5)) / np.sqrt(K)
+        # 0-face A's facade, free space 270 degrees, the same angles), the wedge of one block's
+        # own faces
+        a_corner = (lam / (4 * np.pi) * abs(exact_soft_coefficient(k_l, phi, phi_prime, 1.5)) / np.sqrt(K)
                     * spreading)
         assert abs(db(sn.a[j]) - db(a_corner)) < 3.0
+        # (separately) the engine's wedge is this corner, diffracting at Q
+        g = wedge_geometry(scene, paths, np.array([i]), 0)
+        assert abs(g["n"][0] - n) < 1e-9 and abs(g["beta_0"][0] - np.pi / 2) < 1e-9
+        assert np.linalg.norm(paths.vertices[i, 1] - ref["q"]) < 1e-6

@@ -6,6 +6,12 @@ face's centroid with a float32 margin; on a free edge the other face is the tria
 float32 rounding flips one normal: its wedge becomes flat (n = 1) and the diffracted field
 vanishes. Sommerfeld's exact half-plane solution decides: wavepaths matches it, Sionna's |a| is
 zero to float32 precision.
+
+The exact reference takes nothing from the engine: its angles phi, phi', beta_0, the diffraction
+point and the distances s', s come from the screen's construction (edge P0 -> P1, face below the
+edge, normal N) and the explicit TX and RX positions (:func:`reference_geometry`), not from
+``wedge_geometry`` or the traced path, so an error in the engine's angles or path vertices cannot
+enter both sides of the comparison.
 """
 
 from __future__ import annotations
@@ -39,6 +45,35 @@ TX = (M + 30 * N + [0, 0, 12.0])[None]
 # screen below the edge, on the transmitter's side (behind the screen Sionna's flat wedge finds no
 # path at all: those receivers are only in wavepaths' output)
 RX = np.stack([M + 20 * N + [0, 0, -10.0], M + 35 * N + [0, 0, -5.0], M + 12 * N + [0, 0, -13.0]])
+
+
+def reference_geometry(tx: np.ndarray, rx: np.ndarray) -> dict:
+    """The diffraction at the screen's top edge from the scene's construction alone.
+
+    Edge unit vector e = T (P0 -> P1). The screen hangs below the edge: from the edge into the
+    face is t0 = -z, and its normal on the transmitter's side is n0 = N = z x T; (t0, n0, e) is
+    right-handed ((-z) x (z x T) = T), so this face is the 0-face of docs/conventions.md and
+    angles are measured about e from t0 toward n0, in the plane perpendicular to the edge. (For a
+    half-plane the other labelling maps (phi, phi') to (2 pi - phi, 2 pi - phi'), which leaves
+    Sommerfeld's solution unchanged.) The diffraction point Q is the point of the edge's line where
+    the unfolded path TX -> Q -> RX is straight (Keller's law).
+    """
+    e, t0, n0 = T, np.array([0.0, 0.0, -1.0]), N
+
+    def along_and_radial(p):
+        t = float((p - P0) @ e)
+        return t, float(np.linalg.norm(p - P0 - t * e))
+
+    (t_tx, r_tx), (t_rx, r_rx) = along_and_radial(tx), along_and_radial(rx)
+    q = P0 + (t_tx * r_rx + t_rx * r_tx) / (r_tx + r_rx) * e
+
+    def angle(p):
+        v = p - q
+        return float(np.mod(np.arctan2(v @ n0, v @ t0), 2 * np.pi))
+
+    s_in, s_out = float(np.linalg.norm(q - tx)), float(np.linalg.norm(rx - q))
+    beta_0 = float(np.arccos(np.clip((q - tx) @ e / s_in, -1.0, 1.0)))
+    return {"q": q, "phi_prime": angle(tx), "phi": angle(rx), "beta_0": beta_0, "s_in": s_in, "s_out": s_out}
 
 
 def exact_soft_halfplane(k_l: float, phi: float, phi_prime: float) -> complex:
@@ -88,14 +123,20 @@ def test_sionna_diffraction_vanishes_on_a_free_edge_where_sommerfeld_does_not(tm
 
     for m in top:
         i, j = m.wp_index, m.sn_index
-        g = wedge_geometry(scene, paths, np.array([i]), 0)
-        assert abs(g["n"][0] - 2.0) < 1e-12 and abs(g["beta_0"][0] - np.pi / 2) < 1e-6
-        s_in, s_out = paths.segment_lengths[i][:2]
-        k_l = K * s_in * s_out / (s_in + s_out)
-        d = exact_soft_halfplane(k_l, float(g["phi"][0]), float(g["phi_prime"][0])) / np.sqrt(K)
+        # the reference's geometry, from the scene's construction (not from the engine)
+        ref = reference_geometry(TX[0], RX[m.rx])
+        assert abs(ref["beta_0"] - np.pi / 2) < 1e-9  # TX and RX lie in the plane through M normal to the edge
+        assert 0.0 < ref["phi"] < 2 * np.pi and 0.0 < ref["phi_prime"] < 2 * np.pi
+        s_in, s_out = ref["s_in"], ref["s_out"]
+        k_l = K * s_in * s_out / (s_in + s_out) * np.sin(ref["beta_0"]) ** 2
+        d = exact_soft_halfplane(k_l, ref["phi"], ref["phi_prime"]) / np.sqrt(K)
         a_exact = lam / (4 * np.pi) * abs(d) / np.sqrt(s_in * s_out * (s_in + s_out))
         # wavepaths matches Sommerfeld (UTD is exact for the half-plane; ITU metal, Luebbers): 0.1 dB
         assert abs(db(a_utd[i]) - db(a_exact)) < 0.1
+        # (separately) the engine's wedge is the screen's half-plane, diffracting at Q
+        g = wedge_geometry(scene, paths, np.array([i]), 0)
+        assert abs(g["n"][0] - 2.0) < 1e-12 and abs(g["beta_0"][0] - np.pi / 2) < 1e-6
+        assert np.linalg.norm(paths.vertices[i, 1] - ref["q"]) < 1e-6
         # Sionna's coefficient is zero to float32 precision: at least 60 dB below the exact one
         assert db(sn.a[j]) < db(a_exact) - 60.0
         # and the validation report counts the pair as this known disagreement, not as a violation
