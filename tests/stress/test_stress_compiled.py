@@ -14,27 +14,49 @@ from hypothesis import strategies as st
 from wavepaths.search import TraceOptions, kernels, trace
 
 from ..search.helpers import path_keys
-from .test_stress_properties import SCENES, SETTINGS, points
+from .test_stress_properties import MIN_CHECKED, NEAR, SCENES, SETTINGS, end_points, outer_side, point_of_kind, points
 
 pytestmark = pytest.mark.skipif(not kernels.available(), reason="numba is not installed (the `fast` extra)")
 
 OPTS = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=2, rx_batch=3)
 
 
+TALLY = []  # per example of the path search: its receivers (of 4) with paths in the reference
+
+
 @SETTINGS
 @given(st.data())
-def test_compiled_and_numpy_find_the_same_paths(data):
+def check_compiled_and_numpy_find_the_same_paths(data):
+    """End points where the engine computes paths: the transmitter and a first receiver from
+    end_points (free, snapped or placed for a reflection), three more receivers of any kind
+    (points(outside=True)), a free one put on the outer side of the block faces that hold a
+    transmitter snapped onto a block (behind them it could see it only around the block)."""
     name = data.draw(st.sampled_from(sorted(SCENES)))
     scene = SCENES[name]
-    tx = data.draw(points(name))[None, :]
-    rx = np.array([data.draw(points(name)) for _ in range(4)])
-    assume(np.linalg.norm(rx - tx, axis=1).min() > 1e-6)
+    tx, first, _ = data.draw(end_points(name))
+    rx = [first]
+    for _ in range(3):
+        kind = data.draw(st.sampled_from(NEAR))
+        p = data.draw(point_of_kind(name, kind, outside=True))
+        rx.append(outer_side(name, tx, p) if kind == "free" else p)
+    tx, rx = tx[None, :], np.array(rx)
+    assume(np.linalg.norm(rx - tx, axis=1).min() > 10 * scene.length_tolerance(scene.tolerances.weld))  # else refused
     with warnings.catch_warnings():  # points on faces are defined edge cases; trace warns of them
         warnings.simplefilter("ignore")
         fast = trace(scene, tx, rx, OPTS)
         ref = trace(scene, tx, rx, OPTS.with_(compiled=False))
     note(f"{name} tx={tx.tolist()} rx={rx.tolist()} paths={len(ref)}")
     assert path_keys(fast) == path_keys(ref)
+    TALLY.append(len(np.unique(ref.rx_index)))
+
+
+def test_compiled_and_numpy_find_the_same_paths():
+    """The search above; an example without paths checks nothing, so most must have some."""
+    TALLY.clear()
+    check_compiled_and_numpy_find_the_same_paths()
+    with_paths = sum(1 for n in TALLY if n)
+    assert with_paths >= MIN_CHECKED * len(TALLY), (
+        f"too few examples found paths: {with_paths} of {len(TALLY)}, receivers with paths {sum(TALLY)} of {4 * len(TALLY)}")
 
 
 @SETTINGS
