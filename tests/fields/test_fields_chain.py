@@ -242,3 +242,19 @@ def test_wide_screen_reproduces_itu_p526_knife_edge_loss():
     np.testing.assert_allclose(0.5 * (loss["H"] + loss["V"]), j, atol=0.1)
     zero = int(np.argmin(np.abs(nus)))
     assert 0.5 * (loss["H"][zero] + loss["V"][zero]) == pytest.approx(6.02, abs=0.05)  # nu = 0: the edge halves the field
+
+
+def test_paths_shorter_than_a_wavelength_warn():
+    # ray optics is a far-field method: 1 mm at 3.5 GHz gives a gain above 0 dB (Friis), which
+    # the warning names; 1 m (11.7 wavelengths) does not warn (warnings are errors here)
+    from wavepaths.scene import WavepathsWarning
+
+    s = load_scene("street_canyon")
+    los = TraceOptions(max_reflections=0, diffraction=False)
+    near = trace(s, np.array([[-60.0, 0.0, 10.0]]), np.array([[-60.0, 0.0, 10.001]]), los)
+    with pytest.warns(WavepathsWarning, match=r"1 of 1 paths are shorter than a wavelength \(0.0857 m"):
+        r = compute_fields(s, near, FieldConfig(3.5e9))
+    assert 20 * np.log10(abs(r.a[0])) > 0
+    far = trace(s, np.array([[-60.0, 0.0, 10.0]]), np.array([[-60.0, 0.0, 11.0]]), los)
+    r = compute_fields(s, far, FieldConfig(3.5e9))
+    assert abs(r.a[0]) == pytest.approx(speed_of_light / 3.5e9 / (4 * np.pi * 1.0), rel=1e-12)  # Friis
