@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavepaths import TraceOptions
+from wavepaths import TraceOptions, trace
 from wavepaths.em.materials import itu_material
 from wavepaths.exact.halfplane import halfplane_plane_wave
 from wavepaths.scene import build_scene, load_scene
@@ -206,3 +206,30 @@ def test_shadow_boundary_of_a_reflected_ray_is_compensated_by_the_reflected_diff
         dif = per_receiver(p, f.a_phased, 2, ~go_mask(p))
         assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
         assert abs(t[0] - t[1]) <= CONTINUITY * abs(t).max(), (pol, t)
+
+
+def test_reciprocity_holds_for_a_receiver_exactly_on_a_reflection_boundary():
+    """three_face_edge: the receiver lies on a reflection boundary of the block corner's edge
+    (found by the property tests). The diffraction there takes the GO side by a 1e-9 rad
+    nudge; moved on phi alone it left the two directions' coefficients 5e-9 apart, half on
+    each of phi and phi' it is symmetric: each path's 2x2 transfer matrix is the transpose of
+    its reverse's to 1e-13 relative."""
+    from wavepaths.fields import FieldConfig, transfer_matrices
+
+    s = load_scene("three_face_edge")
+    a = np.array([[3.5341821156612134, -0.05, 4.1746817066270445]])
+    b = np.array([[4.465817884338787, -0.05, 3.825318293372955]])
+    opts = TraceOptions(max_reflections=2, diffraction=True, diffraction_reflections=1)
+    cfg = FieldConfig(3.5e9)
+    forward, backward = trace(s, a, b, opts), trace(s, b, a, opts)
+    assert len(forward) == len(backward) and (forward.interactions == 2).any()
+    tf, tb = transfer_matrices(s, forward, cfg), transfer_matrices(s, backward, cfg)
+
+    def key(p, i, reverse=False):
+        seq = list(zip(p.interactions[i, : p.depth[i]].tolist(), p.primitive[i, : p.depth[i]].tolist()))
+        return tuple(seq[::-1] if reverse else seq)
+
+    back = {key(backward, i, True): i for i in range(len(backward))}
+    for i in range(len(forward)):
+        m, r = tf[i], np.swapaxes(tb[back[key(forward, i)]], -1, -2)
+        assert np.abs(np.abs(m) - np.abs(r)).max() <= 1e-13 * np.abs(m).max(), key(forward, i)

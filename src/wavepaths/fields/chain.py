@@ -229,19 +229,31 @@ def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g
         i = rows[k]
         seq = list(zip(paths.interactions[i, : paths.depth[i]].tolist(), paths.primitive[i, : paths.depth[i]].tolist()))
         t, r = int(paths.tx_index[i]), int(paths.rx_index[i])
+        # the nudge moves phi and phi' by half each, so that the pair's difference (a shadow
+        # boundary) or sum (a reflection boundary) takes its side: symmetric in phi <-> phi', the
+        # path's coefficient is the transpose of its reverse's there too (moving phi alone gave
+        # 5e-9 apart)
         if abs(sb[k]) < margin[k]:
             lit = (t, r, tuple(seq[:j] + seq[j + 1 :])) in keys
             if lit != (sb[k] < 0) or sb[k] == 0:
                 side = 1.0 if phi[k] >= pp[k] else -1.0
-                g["phi"][k] = pp[k] + side * (np.pi - BOUNDARY_NUDGE if lit else np.pi + BOUNDARY_NUDGE)
+                _nudge(g, k, side * (np.pi - BOUNDARY_NUDGE if lit else np.pi + BOUNDARY_NUDGE) - (phi[k] - pp[k]), -1.0)
         elif abs(rb0[k]) < margin[k]:
             lit = (t, r, tuple(seq[:j] + [(1, int(dih.face_polygon[g["face_0"][k]]))] + seq[j + 1 :])) in keys
             if lit != (rb0[k] < 0) or rb0[k] == 0:
-                g["phi"][k] = np.pi - pp[k] + (-BOUNDARY_NUDGE if lit else BOUNDARY_NUDGE)
+                _nudge(g, k, np.pi + (-BOUNDARY_NUDGE if lit else BOUNDARY_NUDGE) - (phi[k] + pp[k]), 1.0)
         else:
             lit = (t, r, tuple(seq[:j] + [(1, int(dih.face_polygon[g["face_n"][k]]))] + seq[j + 1 :])) in keys
             if lit != (rbn[k] > 0) or rbn[k] == 0:
-                g["phi"][k] = (2 * n[k] - 1) * np.pi - pp[k] + (BOUNDARY_NUDGE if lit else -BOUNDARY_NUDGE)
+                _nudge(g, k, (2 * n[k] - 1) * np.pi + (BOUNDARY_NUDGE if lit else -BOUNDARY_NUDGE) - (phi[k] + pp[k]), 1.0)
+
+
+def _nudge(g: dict, k: int, change: float, prime_sign: float) -> None:
+    """Add ``change`` to ``phi - phi'`` (``prime_sign = -1``) or ``phi + phi'`` (``+1``) of row
+    ``k``, half on each angle, both kept in ``[0, n pi]``."""
+    top = g["n"][k] * np.pi
+    g["phi"][k] = min(max(g["phi"][k] + 0.5 * change, 0.0), top)
+    g["phi_prime"][k] = min(max(g["phi_prime"][k] + prime_sign * 0.5 * change, 0.0), top)
 
 
 def _apply_diffraction(scene: "Scene", cfg: FieldConfig, E, paths: Paths, rows, j, s_before, s_after) -> np.ndarray:
