@@ -111,14 +111,27 @@ def test_large_gain_differences_are_counted_by_reason_and_band():
     assert out["by_reason"]["sionna-dr-depends-on-max-depth-not-checked"] == {"6-20 dB": 2, "> 20 dB": 1}
 
 
-def test_diffraction_cost_benchmark_reports_per_path_costs():
+def test_diffraction_cost_benchmark_reports_per_path_costs(monkeypatch):
     """Benchmark 5 (quick): diffraction adds paths and removes none (the same line-of-sight
     and reflected paths in every cell), and the time ratio splits into the paths ratio and
     the per-path costs: t_on / t_off = 1 + (us per diffracted path x diffracted paths) /
-    (us per path off x paths off)."""
-    from wavepaths.bench.diffraction_cost import run_diffraction_cost
+    (us per path off x paths off). Its one-thread maps run numba's kernels on one thread too."""
+    import sys
 
+    from wavepaths.bench.diffraction_cost import run_diffraction_cost
+    from wavepaths.search import kernels
+
+    cov = sys.modules["wavepaths.coverage"]  # (the package's name is also its function's)
+    seen = []
+    real = cov.coverage
+
+    def recording(*args, **kwargs):
+        seen.append((kwargs["settings"].threads, kernels.threads()))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cov, "coverage", recording)
     r = run_diffraction_cost(quick=True, progress=lambda m: None)
+    assert any(t == 1 for t, _ in seen) and all(k == 1 for t, k in seen if t == 1)
     # the headline pair on the default threads, then on one thread (with more than one core)
     assert r["pairs"][0]["threads"] == r["threads"]
     if r["threads"] > 1:

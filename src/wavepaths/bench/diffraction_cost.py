@@ -21,7 +21,9 @@ The two maps of a pair are timed in alternation, ``repeats`` times each (the hea
 (``workers=1``), its tiles on the threads the machine's cores give
 (``CoverageOptions.threads``' default, as :func:`wavepaths.coverage.coverage` runs a map
 this small by default); the headline pair again on one thread beside it
-(``diffraction_cost_ratio_one_thread``): diffraction's work releases the GIL and gains
+(``diffraction_cost_ratio_one_thread``: the tiles on the calling thread and numba's
+kernels on one thread too; before the twenty-fifth session the calling thread's field
+kernels still used numba's two): diffraction's work releases the GIL and gains
 from the second core, the map without diffraction hardly does. Beside it, what a path
 costs: the map without diffraction per path it finds (``us_per_path_off``), the time
 diffraction adds per diffracted path (``us_per_diffracted_path``), and how many more paths
@@ -200,7 +202,15 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
         settings = CoverageOptions(workers=1, threads=n_threads)
 
         def run():
-            last[key] = coverage(scene, STREET_CANYON_TX, grid, TraceOptions(**opts), fields=cfg, settings=settings)
+            # one thread means one: tiles on the calling thread (threads=1) and, as the calling
+            # thread's compiled kernels would use numba's threads, those set to 1 for the call
+            saved = kernels.threads()
+            if n_threads == 1:
+                kernels.set_threads(1)
+            try:
+                last[key] = coverage(scene, STREET_CANYON_TX, grid, TraceOptions(**opts), fields=cfg, settings=settings)
+            finally:
+                kernels.set_threads(saved)
         return run
 
     runner(PAIRS[0][1])()  # warm-up, both maps of the headline pair
