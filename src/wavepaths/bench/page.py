@@ -167,8 +167,12 @@ def _tradeoff_section(to: dict, figures: dict) -> list[str]:
     parts.append("<h2>3. Run time against error</h2>")
     parts.append(f"<p>Error: {html.escape(to['error_metric'])}. The reference is wavepaths with all paths of depth 3 "
                  "(R3+D2) and Sionna's coefficient model (compat), cell-averaged over sub-cells for maps. "
-                 "wavepaths' knobs: reflection order, diffraction and its reflections, sub-cells per cell; it has no "
-                 "pruning tolerance (pruning is exact) and no float32 mode. Sionna's knob: samples per source.</p>")
+                 "wavepaths' knobs: reflection order, diffraction and its reflections, sub-cells per cell, the "
+                 "reflections' pruning threshold (prune N dB: reflections at least N dB below free space dropped) "
+                 "and the tolerance in dB (tol: diffracted contributions that cannot change a cell's power sum by "
+                 "more dropped); it has no float32 mode (geometry is float64). Sionna's knob: samples per source. "
+                 "Each setting is timed once per run (the path queries three times back to back), not in "
+                 "alternating rounds.</p>")
     for part in ("paths", "maps"):
         sec = to[part]
         parts.append(_img(figures.get(f"tradeoff_{part}")))
