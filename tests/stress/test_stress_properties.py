@@ -151,7 +151,10 @@ PAIRS = (("free", "free"), ("snap", "free"), ("free", "snap"), ("specular", "spe
          ("snap", "free"), ("free", "snap"), ("specular", "specular"), ("snap", "snap"))
 GAP = 0.1  # m between the ends: trace refuses coincident ones, compute_fields warns of paths under a wavelength
 MIN_CHECKED = 0.6  # of the examples of a test must find paths and check them
-MIN_SNAPPED = 40  # of them, with an end point snapped onto (or next to) the scene
+MIN_SNAPPED = 25  # of them, with an end point snapped onto (or next to) the scene
+# (35 to 80 measured: Hypothesis draws literal constants from the modules imported before the
+# test as interesting values, so the examples, and these counts, depend on what else ran
+# first; derandomize fixes them for one set of imports only)
 
 
 def _specular_pair(draw, name):
