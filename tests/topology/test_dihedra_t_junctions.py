@@ -131,3 +131,55 @@ def test_a_long_border_edge_keeps_its_diffraction_outside_a_floor_lying_on_part_
     spans = sorted((round(float(min(dh.origin[i, 1], dh.end[i, 1])), 9), round(float(max(dh.origin[i, 1], dh.end[i, 1])), 9),
                     bool(dh.diffracting[i])) for i in border)
     assert spans == [(-20.0, -1.0, True), (1.0, 20.0, True)]
+
+
+@pytest.mark.parametrize("degrees", [0.0, 10.0, 30.0, 45.0])
+def test_a_rotation_keeps_the_tolerances_and_the_diffracting_edges(degrees):
+    """A 10 m box 1.7e-4 m above a 100 m ground, turned about z: the tolerances scale with the
+    scene's size, which a rotation leaves alone (the bounding box's diagonal grew by up to
+    sqrt(2) here and took the box's foot in and out of the plane tolerance: 16 diffracting
+    edges unrotated, 12 at 30 and 45 degrees). The foot stays a right-angled wedge (its gap
+    is above 1e-6 of the size) every way round."""
+    from wavepaths.em.materials import PEC
+    from wavepaths.scene import build_scene
+
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    ground = np.array([[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]], float)
+    lo, hi = np.array([-5, -5, 1.7e-4]), np.array([5, 5, 10.0])
+    corners = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+    box_tris = [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]]
+    v = np.vstack([ground, corners]) @ rot.T
+    t = np.array([[0, 1, 2], [0, 2, 3]] + [[4 + i for i in tri] for tri in box_tris])
+    scene = build_scene(v, t, np.array([0, 0] + [1] * 12), np.zeros(14, int), ["ground", "box"], [PEC])
+    assert scene.diagonal == pytest.approx(2 * np.linalg.norm(v - v.mean(axis=0), axis=1).max(), rel=1e-12)
+    dh = scene.dihedra
+    mid = ((dh.origin + 0.5 * dh.length[:, None] * dh.direction) @ rot)[:, 2]
+    feet = np.abs(mid - 1.7e-4) < 1e-6
+    assert feet.sum() == 4 and dh.diffracting[feet].all()
+    assert int(dh.diffracting.sum()) == 16  # the box's 12 edges and the ground's 4 borders
+
+
+def test_vertices_near_edges_finds_every_pair_a_brute_force_finds():
+    """The T-junction search registers each edge piece by piece along it (a diagonal edge's
+    bounding box covered the whole grid): every (vertex, edge) pair whose vertex lies within
+    the tolerance of the segment is among its candidates, against all pairs tested directly."""
+    from wavepaths.topology.dihedra import _vertices_near_edges
+
+    rng = np.random.default_rng(4)
+    a = rng.uniform(0, 1000, (300, 3)) * [1, 1, 0.02]
+    b = rng.uniform(0, 1000, (300, 3)) * [1, 1, 0.02]
+    t = rng.uniform(0, 1, (2000, 1))
+    pick = rng.integers(0, 300, 2000)
+    points = np.vstack([a[pick] + t * (b[pick] - a[pick]) + rng.normal(0, 0.3, (2000, 3)),
+                        rng.uniform(0, 1000, (500, 3)) * [1, 1, 0.02]])
+    tol = 0.5
+    vi, ei = _vertices_near_edges(a, b, np.minimum(a, b) - tol, np.maximum(a, b) + tol, tol, points)
+    got = set(zip(vi.tolist(), ei.tolist()))
+    assert len(got) == len(vi)  # each pair once
+    d = b - a
+    s = np.clip(np.einsum("pej,ej->pe", points[:, None, :] - a[None], d) / np.einsum("ej,ej->e", d, d), 0, 1)
+    dist = np.linalg.norm(points[:, None, :] - (a[None] + s[..., None] * d[None]), axis=2)
+    near = set(zip(*[x.tolist() for x in np.nonzero(dist <= tol)]))
+    assert len(near) > 1000 and near <= got

@@ -126,8 +126,10 @@ class Scene:
 
     @functools.cached_property
     def diagonal(self) -> float:
-        """Length of the bounding-box diagonal [m], the scale of every tolerance."""
-        return float(max(np.linalg.norm(self.bounds[1] - self.bounds[0]), 1e-9))
+        """The scene's size [m], the scale of every tolerance: :func:`scene_size` of its vertices
+        (the bounding box's diagonal for a box-shaped scene; unlike that diagonal, unchanged when
+        the scene is rotated)."""
+        return max(scene_size(self.vertices[np.unique(self.triangles)]), 1e-9)
 
     @functools.cached_property
     def triangle_dual(self) -> np.ndarray:
@@ -275,7 +277,7 @@ def build_scene(
         raise SceneError(f"{where}object and material ids must have one entry per triangle")
 
     used = vertices[np.unique(triangles)]
-    diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))) or 1.0
+    diagonal = scene_size(used) or 1.0
     welded, index = weld_vertices(vertices, tol.weld * diagonal)
     triangles = index[triangles]
     bad = degenerate_triangles(welded, triangles, (tol.weld * diagonal) ** 2)
@@ -331,6 +333,22 @@ def build_scene(
         source=source,
         dropped_degenerate=dropped,
     )
+
+
+def scene_size(points: np.ndarray) -> float:
+    """Twice the largest distance of ``points`` (n, 3) from their mean [m]: the scale of the
+    scene's tolerances. A rigid motion leaves it unchanged (to rounding), so that a scene and
+    the same scene rotated have the same tolerances and the same topology; the bounding box's
+    diagonal, which it replaces, grows by up to sqrt(3) under a rotation (a square ground
+    turned by 45 degrees about z: sqrt(2)), and moved edges across the coplanar and weld
+    thresholds (a box's foot 1.7e-4 m above its ground diffracted, or not, as the scene
+    turned). For a box-shaped scene with its vertices symmetric about the centre it is the
+    box's diagonal."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return 0.0
+    d = p - p.mean(axis=0)
+    return float(2.0 * np.sqrt(np.einsum("ij,ij->i", d, d).max()))
 
 
 def transformed(scene: Scene, rotation: np.ndarray | None = None, translation: np.ndarray | None = None) -> Scene:

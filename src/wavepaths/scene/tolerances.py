@@ -1,7 +1,9 @@
 """Geometric tolerances, scaled to the scene.
 
 Every tolerance the engine uses is a named field here, with the reason beside it, and
-is expressed relative to the scene's size (the length of its bounding-box diagonal) so
+is expressed relative to the scene's size (``Scene.diagonal``: twice the largest distance of
+a vertex from the vertices' mean, the bounding box's diagonal for a box-shaped scene and,
+unlike that diagonal, unchanged by a rotation) so
 that a 10 m room and a 2 km city behave alike. Nothing is a module global: a
 :class:`SceneTolerances` travels with its :class:`~wavepaths.scene.model.Scene`.
 """
