@@ -148,3 +148,38 @@ def test_a_finely_faceted_object_survives_welding_in_a_large_scene():
     r = np.linalg.norm(used[:, :2], axis=1)
     assert np.all(np.abs(r - 1.0) <= tol) and used[:, 2].max() == pytest.approx(30.0, abs=tol)
     assert np.ptp(used[:, 0]) > 2.0 - 2 * tol and np.ptp(used[:, 1]) > 2.0 - 2 * tol
+
+
+def test_a_gently_curved_ground_is_not_one_polygon_off_its_plane():
+    """A 20 km ground following the Earth in 50 m facets (a fold of 7.8e-6 rad each, under the
+    1e-5 rad coplanar angle): neighbours agree, but chaining them made one polygon whose
+    facets lay metres off its plane. Each polygon's triangles now stay within the coplanar
+    angle of one another, and every vertex within the plane tolerance of its polygon's plane."""
+    r_earth = 6371e3
+    x = np.arange(0.0, 20000.0 + 1, 50.0)
+    th = x / r_earth
+    px, pz = r_earth * np.sin(th), r_earth * np.cos(th) - r_earth
+    quads = [[(px[i], -50, pz[i]), (px[i + 1], -50, pz[i + 1]), (px[i + 1], 50, pz[i + 1]), (px[i], 50, pz[i])]
+             for i in range(len(x) - 1)]
+    s = quads_scene(quads, objects=[0] * len(quads))
+    assert s.num_polygons > 100  # not one polygon (the folds add up to 3.1e-3 rad)
+    tol = s.length_tolerance(s.tolerances.plane_distance)
+    for q in range(s.num_polygons):
+        v = s.vertices[np.unique(s.triangles[s.polygon_triangles(q)])]
+        assert np.abs(v @ s.polygon_normal[q] - s.polygon_offset[q]).max() <= tol
+        n = s.normals[s.polygon_triangles(q)]
+        assert np.abs(n @ n.T).min() >= np.cos(2 * s.tolerances.coplanar_angle)
+    # no fold between them diffracts (each 7.8e-6 rad: flat within the coplanar angle); only
+    # the ground's free borders do
+    dh = s.dihedra
+    assert dh.diffracting.any() and (dh.faces_per_dihedron[dh.diffracting] == 1).all()
+
+
+def test_a_flat_ground_in_many_triangles_is_still_one_polygon():
+    # the regrowing touches only components that turn: a flat 2 km ground of 800 triangles
+    # with float32-rounded vertices (noise far below the angle) is one polygon
+    x = np.linspace(0, 2000.0, 401)
+    quads = [[(x[i], 0, 0), (x[i + 1], 0, 0), (x[i + 1], 30, 0), (x[i], 30, 0)] for i in range(400)]
+    quads = [[tuple(np.float32(c) for c in p) for p in q] for q in quads]
+    s = quads_scene(quads, objects=[0] * 400)
+    assert s.num_polygons == 1
