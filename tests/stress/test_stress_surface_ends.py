@@ -147,3 +147,82 @@ def test_into_is_the_solids_interior_beyond_the_point(tmp_path, solid, point):
             along = w - p
             along = along[np.linalg.norm(along, axis=1) > 1e-6]
             assert not cones[0].into(along).any()
+
+
+def write_obj_solids(path: Path, solids: list[list[tuple]], objects: list[str]) -> Path:
+    """Closed prisms (2-D polygons counter-clockwise, z0, z1) as OBJ objects: ``solids[k]`` the
+    prisms of ``objects[k]`` (several closed parts in one object when it lists more)."""
+    lines, base = [], 0
+    for name, parts in zip(objects, solids):
+        lines.append(f"o {name}")
+        for xy, z0, z1 in parts:
+            k = len(xy)
+            lines += [f"v {float(x)!r} {float(y)!r} {float(z0)!r}" for x, y in xy]
+            lines += [f"v {float(x)!r} {float(y)!r} {float(z1)!r}" for x, y in xy]
+            lines.append("f " + " ".join(str(base + i + 1) for i in reversed(range(k))))
+            lines.append("f " + " ".join(str(base + k + i + 1) for i in range(k)))
+            for i in range(k):
+                j = (i + 1) % k
+                lines.append(f"f {base + i + 1} {base + j + 1} {base + k + j + 1} {base + k + i + 1}")
+            base += 2 * k
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def inside_prisms(p: np.ndarray, parts: list[tuple]) -> np.ndarray:
+    out = np.zeros(len(p), dtype=bool)
+    for xy, z0, z1 in parts:
+        out |= (p[:, 2] > z0) & (p[:, 2] < z1) & inside_polygon(p[:, :2], np.asarray(xy, float))
+    return out
+
+
+def square(x0, y0, x1, y1):
+    return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+
+
+HALF_SLOT = 0.5 * np.tan(0.5e-4)  # a V-slot 0.5 m deep whose walls meet at 1e-4 rad
+CASES = {
+    # one object of two closed parts: a penthouse on a roof (found by a review: every answer flipped)
+    "penthouse": ([[(square(0, 0, 20, 20), 0.0, 10.0), (square(5, 5, 10, 10), 10.0, 13.0)]], ["building"],
+                  [(10.0, 7.0, 10.0), (5.0, 5.0, 10.0), (10.0, 10.0, 10.0), (7.0, 7.0, 13.0), (12.0, 12.0, 10.0)]),
+    # two objects touching along a face: their contact faces bound each block
+    "terrace": ([[(square(0, 0, 10, 10), 0.0, 10.0)], [(square(10, 0, 20, 10), 0.0, 10.0)]], ["a", "b"],
+                [(10.0, 0.0, 10.0), (10.0, 5.0, 10.0), (10.0, 0.0, 5.0)]),
+    # a slot whose walls meet at 1e-4 rad (the reference's tilt must stay between them)
+    "slot": ([[([(0, 0), (10, 0), (10, 1), (5 + HALF_SLOT, 1), (5, 0.5), (5 - HALF_SLOT, 1), (0, 1)], 0.0, 1.0)]],
+             ["slotted"], [(5.0, 0.5, 0.5)]),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_into_on_several_shells_touching_objects_and_a_thin_slot(tmp_path, case):
+    solids, names, points = CASES[case]
+    scene = wp.load_scene(str(write_obj_solids(tmp_path / f"{case}.obj", solids, names)))
+    parts = [part for obj in solids for part in obj]
+    d = np.random.default_rng(6).normal(size=(4000, 3))
+    if case == "slot":
+        d = np.vstack([d, [[0, 1, 0.3], [0, 1, -0.3], [0, 1, 0]]])  # up the slot: its air
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    found = solid_surface_cones(scene, np.asarray(points, float))
+    assert sorted(found) == list(range(len(points)))
+    for k, p in enumerate(points):
+        got = np.zeros(len(d), dtype=bool)
+        for cone in found[k]:
+            got |= cone.into(d)
+        truth = inside_prisms(np.asarray(p) + 1e-7 * d, parts)
+        assert 0 < truth.sum() < len(d)
+        np.testing.assert_array_equal(got, truth, err_msg=f"{case} {p}")
+
+
+def test_into_at_a_triangles_centroid(tmp_path):
+    # the reference direction pointed from the point to its triangle's centroid: NaN there
+    import trimesh
+
+    trimesh.creation.box(extents=(1, 1, 1)).apply_translation((0.5, 0.5, 0.5)).export(tmp_path / "box.obj")
+    scene = wp.load_scene(str(tmp_path / "box.obj"))
+    top = np.flatnonzero(scene.vertices[scene.triangles][:, :, 2].min(axis=1) > 0.999)[0]
+    p = scene.vertices[scene.triangles[top]].mean(axis=0)
+    (cone,) = solid_surface_cones(scene, p[None])[0]
+    assert np.isfinite(cone.reference).all()
+    np.testing.assert_array_equal(cone.into(np.array([[0, 0, -1.0], [0.3, 0.1, -1], [0, 0, 1.0], [1, 0, 0.0]])),
+                                  [True, True, False, False])

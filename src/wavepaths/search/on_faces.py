@@ -136,42 +136,90 @@ class SurfaceCone:
         return (crossings % 2 == 1) & ~along
 
 
-def _surface_cone(scene: Scene, point: np.ndarray, polygons: np.ndarray, tol: float) -> SurfaceCone | None:
-    """The :class:`SurfaceCone` of one solid object at ``point`` from the ``polygons`` of it the
-    point lies on (their outward normals from ``scene.outward_sign``)."""
-    normals = scene.polygon_normal[polygons] * scene.outward_sign[polygons][:, None]
-    tri_face, edge_normals, edge_on, first = [], [], [], None
-    for f, q in enumerate(polygons):
-        n = normals[f]
-        for t in scene.polygon_triangles(int(q)):
-            v = scene.vertices[scene.triangles[t]]
-            sides = np.roll(v, -1, axis=0) - v  # side i from vertex i to i + 1
-            inward = np.cross(n, sides)  # in the plane, perpendicular to side i
-            inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-300)
-            toward = np.einsum("ij,ij->i", np.roll(v, -2, axis=0) - v, inward)  # the opposite vertex's side
-            inward *= np.where(toward < 0, -1.0, 1.0)[:, None]
-            dist = np.einsum("ij,ij->i", point[None, :] - v, inward)  # >= 0 inside the triangle
-            if np.all(dist >= -tol):
-                tri_face.append(f)
-                edge_normals.append(inward)
-                edge_on.append(dist <= tol)
-                if first is None:
-                    first = (f, v)
-    if first is None:
-        return None
-    # the reference: from the point toward its first triangle's centroid, 1e-3 rad off the face
-    f0, v0 = first
-    n0 = normals[f0]
+def _shells(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """``(shell, outward)``: per triangle, its shell (the edge-connected part of its object: a
+    penthouse modelled as its own closed box in the building's mesh is one) and its outward
+    unit normal if its object is a solid (the winding's normal, turned by the sign of the
+    object's volume; closed objects are consistently wound), else zeros. Cached on the scene."""
+    cache = scene.__dict__.setdefault("_coverage_cache", {})
+    if "shells" not in cache:
+        from ..scene.closed import _signed_volume, solid_objects_mask
+        from ..scene.mesh_topology import _UnionFind
+
+        tris = scene.triangles
+        inc = scene.incidence
+        uf = _UnionFind(len(tris))
+        # triangles of one object on one edge are joined (on the edge two touching blocks
+        # share, four triangles meet: two of each)
+        for k in np.unique(inc.counts[inc.counts >= 2]).tolist():
+            block = inc.incidence_tri[inc.incidence_ptr[:-1][inc.counts == k][:, None] + np.arange(k)[None, :]]
+            for x in range(k):
+                for y in range(x + 1, k):
+                    a, b = block[:, x], block[:, y]
+                    same = scene.triangle_object[a] == scene.triangle_object[b]
+                    uf.union_pairs(a[same], b[same])
+        shell = uf.find_all().astype(np.int64)
+        v = scene.vertices[tris]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        solid = solid_objects_mask(scene)
+        sign = np.array([np.sign(_signed_volume(scene, o)) if solid[o] else 0.0 for o in range(len(solid))])
+        outward = n * sign[scene.triangle_object][:, None]
+        cache["shells"] = (shell, outward)
+    return cache["shells"]
+
+
+def _triangle_sides(v: np.ndarray, n: np.ndarray, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """In-plane unit normals (m, 3, 3) of the sides of triangles ``v`` (m, 3, 3) of normals ``n``,
+    pointing into them (side i from vertex i to i + 1), and ``point``'s distances (m, 3) to the
+    sides' lines, positive inside."""
+    sides = np.roll(v, -1, axis=1) - v
+    inward = np.cross(n[:, None, :], sides)
+    inward /= np.maximum(np.linalg.norm(inward, axis=2, keepdims=True), 1e-300)
+    toward = np.einsum("mij,mij->mi", np.roll(v, -2, axis=1) - v, inward)
+    inward *= np.where(toward < 0, -1.0, 1.0)[..., None]
+    return inward, np.einsum("mij,mij->mi", point[None, None, :] - v, inward)
+
+
+def _surface_cone(point: np.ndarray, faces: list[tuple[np.ndarray, np.ndarray]], tol: float) -> SurfaceCone:
+    """The :class:`SurfaceCone` of one closed shell at ``point`` from its faces there: per face
+    (a polygon's triangles of the shell holding the point) its outward unit normal and the
+    triangles' vertices (m, 3, 3)."""
+    normals, tri_face, edge_normals, edge_on = [], [], [], []
+    for f, (n, v) in enumerate(faces):
+        inward, dist = _triangle_sides(v, np.broadcast_to(n, (len(v), 3)), point)
+        normals.append(n)
+        tri_face += [f] * len(v)
+        edge_normals.append(inward)
+        edge_on.append(dist <= tol)
+    normals = np.asarray(normals)
+    # the reference: from the point into its first triangle (toward its centroid, or its farthest
+    # corner when the point is the centroid), tilted off the face along the outward normal by
+    # 1e-3 rad, or by half the smallest angle at which another face's plane crosses that tilt
+    n0, v0 = faces[0][0], faces[0][1][0]
     w0 = v0.mean(axis=0) - point
     w0 -= (w0 @ n0) * n0
-    ref = w0 / np.linalg.norm(w0) + 1e-3 * n0
-    return SurfaceCone(normals, np.asarray(tri_face, np.int64), np.asarray(edge_normals), np.asarray(edge_on),
-                       ref / np.linalg.norm(ref))
+    size = np.linalg.norm(v0 - v0.mean(axis=0), axis=1).max()
+    if np.linalg.norm(w0) <= 1e-6 * size:
+        w0 = v0[np.argmax(np.linalg.norm(v0 - point, axis=1))] - point
+        w0 -= (w0 @ n0) * n0
+    w0 /= np.linalg.norm(w0)
+    lift = 1e-3
+    for nf in normals[1:]:
+        den = float(n0 @ nf)
+        if abs(den) > 1e-300:
+            alpha = np.arctan(-float(w0 @ nf) / den)  # where cos(a) w0 + sin(a) n0 meets nf's plane
+            if 0.0 < alpha < np.pi / 2:
+                lift = min(lift, 0.5 * alpha)
+    ref = np.cos(lift) * w0 + np.sin(lift) * n0
+    return SurfaceCone(normals, np.asarray(tri_face, np.int64), np.concatenate(edge_normals),
+                       np.concatenate(edge_on), ref / np.linalg.norm(ref))
 
 
 def solid_surface_cones(scene: Scene, points: np.ndarray, budget: int = BUDGET) -> dict[int, list[SurfaceCone]]:
-    """For each point lying on faces of solid objects: ``{point: [SurfaceCone per solid]}``
-    (a point on the edge two touching blocks share lies on both). Empty for points on no solid."""
+    """For each point lying on faces of solid objects: ``{point: [SurfaceCone per closed shell]}``
+    (a point on the edge two touching blocks share lies on both; a leg enters the solid when it
+    enters any of them). Empty for points on no solid."""
     from ..raycast import plane_tolerance
     from ..scene.closed import solid_objects_mask
 
@@ -179,16 +227,27 @@ def solid_surface_cones(scene: Scene, points: np.ndarray, budget: int = BUDGET) 
     i, q = _on_face_pairs(scene, points, budget)
     if len(i) == 0:
         return {}
-    solid = solid_objects_mask(scene)[scene.polygon_object[q]] & (scene.outward_sign[q] != 0)
-    i, q = i[solid], q[solid]
+    keep = solid_objects_mask(scene)[scene.polygon_object[q]]
+    i, q = i[keep], q[keep]
+    if len(i) == 0:
+        return {}
+    shell, outward = _shells(scene)
     tol = plane_tolerance(scene)
     out: dict[int, list[SurfaceCone]] = {}
     for p in np.unique(i):
-        mine = q[i == p]
-        for obj in np.unique(scene.polygon_object[mine]):
-            cone = _surface_cone(scene, points[p], mine[scene.polygon_object[mine] == obj], tol)
-            if cone is not None:
-                out.setdefault(int(p), []).append(cone)
+        point = points[p]
+        faces: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for poly in q[i == p].tolist():
+            t = scene.polygon_triangles(poly)
+            v = scene.vertices[scene.triangles[t]]
+            _, dist = _triangle_sides(v, outward[t], point)
+            held = t[np.all(dist >= -tol, axis=1)]
+            for sh in np.unique(shell[held]).tolist():
+                mine = held[shell[held] == sh]
+                faces.setdefault(sh, []).append((outward[mine[0]], scene.vertices[scene.triangles[mine]]))
+        cones = [_surface_cone(point, f, tol) for f in faces.values()]
+        if cones:
+            out[int(p)] = cones
     return out
 
 
