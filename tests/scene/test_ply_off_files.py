@@ -249,3 +249,12 @@ def test_sionna_scene_meshes_read_as_trimesh_reads_them(name):
         ours, theirs = read_ply(path), trimesh.load(path, process=False)
         np.testing.assert_array_equal(ours.vertices, np.asarray(theirs.vertices, np.float64), err_msg=path)
         np.testing.assert_array_equal(ours.indices.reshape(-1, 3), np.asarray(theirs.faces), err_msg=path)
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".off"])
+def test_a_byte_order_mark_is_read_past(tmp_path, suffix):
+    # (some Windows tools write one; trimesh read such files, so they must keep loading)
+    v = polygon_3d(L_SHAPE)
+    path = write_ply(tmp_path / "m.ply", v, [list(range(6))]) if suffix == ".ply" else write_off(tmp_path / "m.off", v, [list(range(6))])
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    assert load_scene(str(path)).areas.sum() == pytest.approx(175.0, rel=1e-12)

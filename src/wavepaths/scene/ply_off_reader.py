@@ -92,7 +92,7 @@ def _checked(path: str, vertices: np.ndarray, counts: np.ndarray, indices: np.nd
 def read_off(path: str) -> PolygonFile:
     """The polygons of the OFF file ``path``."""
     with open(path, "rb") as fh:
-        text = fh.read().decode("utf-8", errors="replace")
+        text = fh.read().decode("utf-8-sig", errors="replace")  # (a byte-order mark first: dropped)
     rows = []  # (line number, tokens) of the non-empty lines, comments removed
     for number, line in enumerate(text.splitlines(), start=1):
         tokens = line.split("#", 1)[0].split()
@@ -307,6 +307,8 @@ def read_ply(path: str) -> PolygonFile:
     """The polygons of the PLY file ``path``."""
     with open(path, "rb") as fh:
         data = fh.read()
+    if data.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark before the header
+        data = data[3:]
     fmt, elements, body = _ply_header(path, data)
     names = [e.name for e in elements]
     if "vertex" not in names or "face" not in names:
