@@ -232,17 +232,18 @@ def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g
         # the nudge moves phi and phi' by half each, so that the pair's difference (a shadow
         # boundary) or sum (a reflection boundary) takes its side: symmetric in phi <-> phi', the
         # path's coefficient is the transpose of its reverse's there too (moving phi alone gave
-        # 5e-9 apart)
+        # 5e-9 apart). A shadow and a reflection boundary both within the margin (a source
+        # grazing a face) are each given their side: the difference and the sum move apart
         if abs(sb[k]) < margin[k]:
             lit = (t, r, tuple(seq[:j] + seq[j + 1 :])) in keys
             if lit != (sb[k] < 0) or sb[k] == 0:
                 side = 1.0 if phi[k] >= pp[k] else -1.0
                 _nudge(g, k, side * (np.pi - BOUNDARY_NUDGE if lit else np.pi + BOUNDARY_NUDGE) - (phi[k] - pp[k]), -1.0)
-        elif abs(rb0[k]) < margin[k]:
+        if abs(rb0[k]) < margin[k]:
             lit = (t, r, tuple(seq[:j] + [(1, int(dih.face_polygon[g["face_0"][k]]))] + seq[j + 1 :])) in keys
             if lit != (rb0[k] < 0) or rb0[k] == 0:
                 _nudge(g, k, np.pi + (-BOUNDARY_NUDGE if lit else BOUNDARY_NUDGE) - (phi[k] + pp[k]), 1.0)
-        else:
+        elif abs(rbn[k]) < margin[k]:
             lit = (t, r, tuple(seq[:j] + [(1, int(dih.face_polygon[g["face_n"][k]]))] + seq[j + 1 :])) in keys
             if lit != (rbn[k] > 0) or rbn[k] == 0:
                 _nudge(g, k, (2 * n[k] - 1) * np.pi + (BOUNDARY_NUDGE if lit else -BOUNDARY_NUDGE) - (phi[k] + pp[k]), 1.0)
