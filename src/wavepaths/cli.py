@@ -45,7 +45,7 @@ def json_text(value, indent: int | None = 1) -> str:
     return json.dumps(json_ready(value), indent=indent, allow_nan=False)
 
 
-SCENE_HELP = "built-in scene name or scene file (XML, OBJ, PLY, STL, glTF)"
+SCENE_HELP = "built-in scene name or scene file (XML, OBJ, PLY, OFF, STL, glTF/GLB)"
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:

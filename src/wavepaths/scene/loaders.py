@@ -144,19 +144,13 @@ def _read_polygon_file(path: str, ext: str, material: Material, tolerances: Scen
 def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances | None = None,
                     up_axis: str = "auto", materials: Mapping[str, Material | str] | None = None):
     ext = os.path.splitext(path)[1].lower()
-    if ext in (".ply", ".off"):
+    # the formats read here (their polygons split exactly), the others through trimesh below
+    own = {".obj": lambda: _read_obj_file(path, material, tolerances, materials),
+           ".ply": lambda: _read_polygon_file(path, ext, material, tolerances),
+           ".off": lambda: _read_polygon_file(path, ext, material, tolerances)}
+    if ext in own:
         try:
-            v, t, o, m, names, table = _read_polygon_file(path, ext, material, tolerances)
-        except (SceneError, WavepathsError):
-            raise
-        except Exception as exc:
-            raise SceneError(f"{path}: cannot read mesh ({exc})") from None
-        if _rotates_to_z_up(ext, up_axis):
-            v = v @ Y_UP_TO_Z_UP.T
-        return v, t, o, m, names, table
-    if ext == ".obj":
-        try:
-            v, t, o, m, names, table = _read_obj_file(path, material, tolerances, materials)
+            v, t, o, m, names, table = own[ext]()
         except (SceneError, WavepathsError):
             raise
         except Exception as exc:
