@@ -73,7 +73,8 @@ def points_on_surfaces(scene: Scene, points: np.ndarray, budget: int = BUDGET) -
 
 @dataclass(frozen=True)
 class SurfaceCone:
-    """The surface of one solid object around a point lying on it: the faces through the point.
+    """The surface of one closed shell of a solid object around a point lying on it: the shell's
+    faces through the point.
 
     Near the point the solid is a cone (its tangent cone), bounded by the faces' own cones:
     a half-space on one face, a wedge on an edge (convex or reflex), a polyhedral cone at a
@@ -91,8 +92,10 @@ class SurfaceCone:
         Whether the point lies on each side's line (within the plane tolerance): the side
         bounds the triangle's cone at the point.
     reference : (3,) float64
-        A unit direction just outside the solid: into the first face's triangle, tilted
-        1e-3 rad off it along its outward normal.
+        A unit direction just outside the shell: into the first face's triangle (toward its
+        centroid, or its farthest corner from a point at the centroid), tilted off it along
+        its outward normal by 1e-3 rad, or by half the smallest angle at which another
+        face's plane crosses that tilt (a slot whose walls meet at 1e-4 rad).
     """
 
     normals: np.ndarray
