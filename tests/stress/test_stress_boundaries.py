@@ -79,27 +79,30 @@ def case_params():
     return out
 
 
+def either_side(scene, tx: np.ndarray, kind: str, rho: float, delta: float, pol: str):
+    """Two receivers ``rho`` from the edge, ``delta`` [rad] either side of the boundary of
+    ``kind``: their total fields (2,), geometrical-optics path counts (2,) and diffracted fields (2,)."""
+    b = boundary_direction(tx[0], kind)
+    rx = np.array([rho * rotate_yz(b, s * delta) for s in (-1, 1)])
+    t, p, f = total_field(scene, tx, rx, OPTS, pol)
+    go = go_mask(p)
+    return t, np.bincount(p.rx_index[go], minlength=2), per_receiver(p, f.a_phased, 2, ~go)
+
+
 @pytest.mark.parametrize("rho", [3.0, 40.0])
 @pytest.mark.parametrize("name, tx, kind", case_params())
 def test_total_field_is_continuous_within_1e9_rad_of_a_boundary(name, tx, kind, rho):
     scene = SCENES[name]()
     tx = np.array([tx])
-    b = boundary_direction(tx[0], kind)
-    rx = np.array([rho * rotate_yz(b, s * DELTA) for s in (-1, 1)])
     for pol in ("V", "H"):
-        t, p, f = total_field(scene, tx, rx, OPTS, pol)
+        t, go, dif = either_side(scene, tx, kind, rho, DELTA, pol)
         # not vacuous: a boundary indeed. Either the search's geometrical-optics decision
         # switches between the two receivers (the diffracted field alone then jumps), or it puts
         # both, within its float margin of the edge, on one side, and the diffracted field
         # follows it; 1e-3 rad away the diffracted field must jump in any case.
-        go = go_mask(p)
-        same_go = (np.bincount(p.rx_index[go], minlength=2)[0] == np.bincount(p.rx_index[go], minlength=2)[1])
-        dif = per_receiver(p, f.a_phased, 2, ~go)
-        if not same_go:
+        if go[0] != go[1]:
             assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
-        far = np.array([rho * rotate_yz(b, s * 1e-3) for s in (-1, 1)])
-        t2, p2, f2 = total_field(scene, tx, far, OPTS, pol)
-        dif2 = per_receiver(p2, f2.a_phased, 2, ~go_mask(p2))
+        t2, _, dif2 = either_side(scene, tx, kind, rho, 1e-3, pol)
         assert abs(dif2[0] - dif2[1]) > 0.1 * abs(t2).max(), (pol, dif2)
         assert abs(t[0] - t[1]) <= CONTINUITY * abs(t).max(), (pol, t, abs(t[0] - t[1]) / abs(t).max())
 
@@ -119,14 +122,9 @@ def test_total_field_is_continuous_where_the_geometrical_optics_set_switches(nam
     reflection in the diffraction leaves a jump of about twice the reflected field)."""
     scene = SCENES[name]()
     tx = np.array([tx])
-    b = boundary_direction(tx[0], kind)
-    rx = np.array([rho * rotate_yz(b, s * SWITCH_DELTA) for s in (-1, 1)])
     for pol in ("V", "H"):
-        t, p, f = total_field(scene, tx, rx, OPTS, pol)
-        go = go_mask(p)
-        counts = np.bincount(p.rx_index[go], minlength=2)
+        t, counts, dif = either_side(scene, tx, kind, rho, SWITCH_DELTA, pol)
         assert counts[0] != counts[1], (pol, counts)  # the boundary is crossed
-        dif = per_receiver(p, f.a_phased, 2, ~go)
         assert abs(dif[0] - dif[1]) > 0.1 * abs(t).max(), (pol, dif)
         assert abs(t[0] - t[1]) <= SWITCH_CONTINUITY * abs(t).max(), (pol, t, abs(t[0] - t[1]) / abs(t).max())
 

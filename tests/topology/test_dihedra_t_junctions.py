@@ -165,7 +165,7 @@ def test_vertices_near_edges_finds_every_pair_a_brute_force_finds():
     """The T-junction search registers each edge piece by piece along it (a diagonal edge's
     bounding box covered the whole grid): every (vertex, edge) pair whose vertex lies within
     the tolerance of the segment is among its candidates, against all pairs tested directly."""
-    from wavepaths.topology.dihedra import _vertices_near_edges
+    from wavepaths.topology.grid import vertices_near_edges
 
     rng = np.random.default_rng(4)
     a = rng.uniform(0, 1000, (300, 3)) * [1, 1, 0.02]
@@ -175,7 +175,7 @@ def test_vertices_near_edges_finds_every_pair_a_brute_force_finds():
     points = np.vstack([a[pick] + t * (b[pick] - a[pick]) + rng.normal(0, 0.3, (2000, 3)),
                         rng.uniform(0, 1000, (500, 3)) * [1, 1, 0.02]])
     tol = 0.5
-    vi, ei = _vertices_near_edges(a, b, np.minimum(a, b) - tol, np.maximum(a, b) + tol, tol, points)
+    vi, ei = vertices_near_edges(a, b, np.minimum(a, b) - tol, np.maximum(a, b) + tol, tol, points)
     got = set(zip(vi.tolist(), ei.tolist()))
     assert len(got) == len(vi)  # each pair once
     d = b - a

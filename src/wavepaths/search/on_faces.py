@@ -184,13 +184,13 @@ def _triangle_sides(v: np.ndarray, n: np.ndarray, point: np.ndarray) -> tuple[np
     return inward, np.einsum("mij,mij->mi", point[None, None, :] - v, inward)
 
 
-def _surface_cone(point: np.ndarray, faces: list[tuple[np.ndarray, np.ndarray]], tol: float) -> SurfaceCone:
+def _surface_cone(point: np.ndarray, faces: list[tuple], tol: float) -> SurfaceCone:
     """The :class:`SurfaceCone` of one closed shell at ``point`` from its faces there: per face
-    (a polygon's triangles of the shell holding the point) its outward unit normal and the
-    triangles' vertices (m, 3, 3)."""
+    (a polygon's triangles of the shell holding the point) its outward unit normal, the
+    triangles' vertices (m, 3, 3), and their sides' inward normals and the point's distances
+    to them (:func:`_triangle_sides`)."""
     normals, tri_face, edge_normals, edge_on = [], [], [], []
-    for f, (n, v) in enumerate(faces):
-        inward, dist = _triangle_sides(v, np.broadcast_to(n, (len(v), 3)), point)
+    for f, (n, v, inward, dist) in enumerate(faces):
         normals.append(n)
         tri_face += [f] * len(v)
         edge_normals.append(inward)
@@ -239,15 +239,16 @@ def solid_surface_cones(scene: Scene, points: np.ndarray, budget: int = BUDGET) 
     out: dict[int, list[SurfaceCone]] = {}
     for p in np.unique(i):
         point = points[p]
-        faces: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+        faces: dict[int, list[tuple]] = {}
         for poly in q[i == p].tolist():
             t = scene.polygon_triangles(poly)
             v = scene.vertices[scene.triangles[t]]
-            _, dist = _triangle_sides(v, outward[t], point)
-            held = t[np.all(dist >= -tol, axis=1)]
-            for sh in np.unique(shell[held]).tolist():
-                mine = held[shell[held] == sh]
-                faces.setdefault(sh, []).append((outward[mine[0]], scene.vertices[scene.triangles[mine]]))
+            inward, dist = _triangle_sides(v, outward[t], point)
+            held = np.all(dist >= -tol, axis=1)
+            t, v, inward, dist = t[held], v[held], inward[held], dist[held]
+            for sh in np.unique(shell[t]).tolist():
+                mine = shell[t] == sh
+                faces.setdefault(sh, []).append((outward[t[mine][0]], v[mine], inward[mine], dist[mine]))
         cones = [_surface_cone(point, f, tol) for f in faces.values()]
         if cones:
             out[int(p)] = cones

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..scene.mesh_topology import _UnionFind
 from ..scene.polygon_query import points_in_polygons
+from .grid import grid_index, grid_pairs, grid_query, vertices_near_edges
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -117,51 +118,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)
 
 
-def _grid_index(lo: np.ndarray, hi: np.ndarray, cells_per_axis: int = 256) -> tuple:
-    """A uniform 2-D grid over the boxes' two widest axes, each box registered in every cell its
-    footprint overlaps: ``(axes, origin, cell size, nx, ny, ptr, box)`` for :func:`_grid_query`."""
-    span = np.maximum(hi.max(axis=0) - lo.min(axis=0), 1e-12)
-    ax = np.argsort(span)[::-1][:2]
-    origin = lo.min(axis=0)[ax]
-    size = span[ax].max() / cells_per_axis
-    nx, ny = (np.ceil(span[ax] / size).astype(int) + 1).tolist()
-    b0 = np.clip(np.floor((lo[:, ax] - origin) / size).astype(np.int64), 0, [nx - 1, ny - 1])
-    b1 = np.clip(np.floor((hi[:, ax] - origin) / size).astype(np.int64), 0, [nx - 1, ny - 1])
-    cx = b1[:, 0] - b0[:, 0] + 1
-    cy = b1[:, 1] - b0[:, 1] + 1
-    count = cx * cy
-    box = np.repeat(np.arange(len(lo)), count)
-    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    gx = b0[box, 0] + k % cx[box]
-    gy = b0[box, 1] + k // cx[box]
-    cell = gx * ny + gy
-    order = np.argsort(cell, kind="stable")
-    cell, box = cell[order], box[order]
-    ptr = np.searchsorted(cell, np.arange(nx * ny + 1))
-    return ax, origin, size, nx, ny, ptr, box
-
-
-def _grid_query(grid: tuple, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate (point, box) pairs of a :func:`_grid_index`: the boxes registered in each
-    point's cell."""
-    ax, origin, size, nx, ny, ptr, box = grid
-    pc = np.clip(np.floor((points[:, ax] - origin) / size).astype(np.int64), 0, [nx - 1, ny - 1])
-    qcell = pc[:, 0] * ny + pc[:, 1]
-    n = ptr[qcell + 1] - ptr[qcell]
-    point = np.repeat(np.arange(len(points)), n)
-    j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
-    return point, box[ptr[qcell][point] + j]
-
-
-def _grid_pairs(lo: np.ndarray, hi: np.ndarray, points: np.ndarray, cells_per_axis: int = 256):
-    """Candidate (point, box) pairs: points falling in a grid cell that the box overlaps.
-
-    A uniform 2-D grid over the two widest axes; each box is registered in every cell its
-    (padded) footprint overlaps, each point looks up its own cell. Returns two index arrays.
-    """
-    return _grid_query(_grid_index(lo, hi, cells_per_axis), points)
-
-
 def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarray):
     """Pairs (edge, polygon) where the edge lies in the plane and box of a polygon.
 
@@ -185,32 +141,13 @@ def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarra
     lo -= tol
     hi += tol
     mid = 0.5 * (edge_a + edge_b)
-    ei, pi = _grid_pairs(lo, hi, mid)
+    ei, pi = grid_pairs(lo, hi, mid)
     inside_box = np.all((mid[ei] >= lo[pi]) & (mid[ei] <= hi[pi]), axis=1)
     ei, pi = ei[inside_box], pi[inside_box]
     da = np.abs(np.einsum("ij,ij->i", edge_a[ei], n[pi]) - d[pi])
     db = np.abs(np.einsum("ij,ij->i", edge_b[ei], n[pi]) - d[pi])
     ok = (da <= tol) & (db <= tol)
     return ei[ok], pi[ok]
-
-
-def _vertices_near_edges(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float,
-                         points: np.ndarray, cells_per_axis: int = 256) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate (point, edge) pairs of :func:`_grid_pairs` for the segments ``a``-``b`` (boxes
-    ``lo``, ``hi``), each pair once. Each edge is registered piece by piece, pieces no longer
-    than a grid cell, so that it takes the cells along it, not every cell of its bounding box:
-    800 long diagonal edges across a ground took 52 M grid entries, 3.4 GB and 12 s that way."""
-    span = (hi.max(axis=0) - lo.min(axis=0)).max()
-    size = max(span / cells_per_axis, 1e-12)
-    m = np.maximum(1, np.ceil(np.abs(b - a).max(axis=1) / size)).astype(np.int64)
-    edge = np.repeat(np.arange(len(a)), m)
-    k = np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m)
-    d = (b - a)[edge]
-    p0 = a[edge] + (k / m[edge])[:, None] * d
-    p1 = a[edge] + ((k + 1) / m[edge])[:, None] * d
-    vi, pi = _grid_pairs(np.minimum(p0, p1) - tol, np.maximum(p0, p1) + tol, points, cells_per_axis)
-    code = np.unique(vi.astype(np.int64) * len(a) + edge[pi])
-    return code // len(a), code % len(a)
 
 
 def _split_t_junctions(scene: "Scene"):
@@ -248,7 +185,7 @@ def _split_t_junctions(scene: "Scene"):
     length = np.linalg.norm(b - a, axis=1)
     w = (b - a) / np.where(length > 0, length, 1.0)[:, None]
     lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
-    vi, ei = _vertices_near_edges(a, b, lo, hi, tol, verts)
+    vi, ei = vertices_near_edges(a, b, lo, hi, tol, verts)
     keep = (vi != E[ei, 0]) & (vi != E[ei, 1])
     keep &= np.all((verts[vi] >= lo[ei]) & (verts[vi] <= hi[ei]), axis=1)
     vi, ei = vi[keep], ei[keep]
@@ -312,9 +249,10 @@ def _coplanar_polygon_pairs(scene: "Scene", a: np.ndarray, b: np.ndarray) -> tup
     """Pairs (edge, polygon) where edge ``[a, b]`` lies in the polygon's plane and meets its
     (padded) bounding box somewhere along its length, not only at its midpoint.
 
-    Points are sampled along each edge every half grid cell of :func:`_grid_pairs` (which
-    looks them up), and the boxes are padded by half that spacing: a box that the segment
-    meets holds, padded, the sample nearest the meeting point.
+    Points are sampled along each edge every half grid cell of
+    :func:`~wavepaths.topology.grid.grid_pairs` (which looks them up), and the boxes are padded
+    by half that spacing: a box that the segment meets holds, padded, the sample nearest the
+    meeting point.
     """
     tol = scene.length_tolerance(scene.tolerances.plane_distance)
     n, d = scene.polygon_normal, scene.polygon_offset
@@ -336,13 +274,13 @@ def _coplanar_polygon_pairs(scene: "Scene", a: np.ndarray, b: np.ndarray) -> tup
     # the signed distances of the edges' ends to every plane are cheap beside the lookups:
     # each chunk keeps only its coplanar pairs before they are made unique
     found = []
-    grid = _grid_index(lo, hi, cells)  # once: a ground's box takes every cell
+    grid = grid_index(lo, hi, cells)  # once: a ground's box takes every cell
     for s0 in range(0, int(first[-1]), BORDER_SAMPLES_PER_CHUNK):
         s = np.arange(s0, min(s0 + BORDER_SAMPLES_PER_CHUNK, int(first[-1])))
         edge = np.searchsorted(first, s, side="right") - 1
         f = (s - first[edge]) / np.maximum(per[edge] - 1, 1)
         pts = a[edge] + f[:, None] * (b[edge] - a[edge])
-        si, pi = _grid_query(grid, pts)
+        si, pi = grid_query(grid, pts)
         ei = edge[si]
         ok = np.abs(np.einsum("ij,ij->i", a[ei], n[pi]) - d[pi]) <= tol
         ei, pi, si = ei[ok], pi[ok], si[ok]
