@@ -30,7 +30,9 @@ class SceneTolerances:
         by ~1e-6 rad; 1e-5 rad keeps distinct facets of curved objects apart.
     plane_distance : float
         A point lies in a plane when within ``plane_distance * diagonal`` of it (used to
-        find edges lying inside another object's face).
+        find edges lying inside another object's face, and to call an edge flat when its
+        faces' corners lie that close to its tallest face's plane: float32 rounding turns
+        a thin triangle's normal by more than ``coplanar_angle``, not its corner off the plane).
     ray_offset : float
         The float32 uncertainty budget of the ray casts, relative to the diagonal. Embree
         works in float32 on recentred coordinates, whose resolution is about 6e-8 of the

@@ -1,0 +1,114 @@
+"""Flat edges (seed §3.2, step 3 of :mod:`wavepaths.topology.dihedra`): an edge whose faces are
+coplanar is never a dihedron, whether the mesh file rounded its vertices or not; a fold
+the scene's tolerance can resolve stays one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavepaths.em.materials import PEC
+from wavepaths.scene import build_scene
+
+GROUND = 500.0  # half-size of the ground square [m]: a scene about 1.4 km across
+
+
+def _strips_scene(corners: np.ndarray):
+    """A ground square at z = 0 and free-standing quads ``corners`` (k, 4, 3), each split
+    along its diagonal 0-2 into two triangles, one object per quad."""
+    g = GROUND
+    verts = [np.array([[-g, -g, 0.0], [g, -g, 0.0], [g, g, 0.0], [-g, g, 0.0]])]
+    tris = [np.array([[0, 1, 2], [0, 2, 3]])]
+    obj = [np.zeros(2, int)]
+    for i, q in enumerate(corners):
+        base = 4 * (i + 1)
+        verts.append(q)
+        tris.append(np.array([[0, 1, 2], [0, 2, 3]]) + base)
+        obj.append(np.full(2, i + 1))
+    names = [f"o{i}" for i in range(len(corners) + 1)]
+    tri = np.concatenate(tris)
+    return build_scene(np.concatenate(verts), tri, np.concatenate(obj), np.zeros(len(tri), int), names, [PEC])
+
+
+def _strip(center, yaw: float, tilt: float, length: float, height: float) -> np.ndarray:
+    """A rectangle ``length`` x ``height`` [m] centred on ``center``, its long side horizontal
+    at azimuth ``yaw``, its short side ``tilt`` from the vertical (a roof's slope)."""
+    u = np.array([np.cos(yaw), np.sin(yaw), 0.0]) * length / 2
+    side = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    z = (np.cos(tilt) * np.array([0.0, 0.0, 1.0]) + np.sin(tilt) * side) * height / 2
+    c = np.asarray(center, float)
+    return np.array([c - u - z, c + u - z, c + u + z, c - u + z])
+
+
+def _on_diagonal(scene, corners: np.ndarray) -> np.ndarray:
+    """Per quad, whether some dihedron runs along its diagonal 0-2."""
+    d = scene.dihedra
+    mid = d.origin + 0.5 * d.length[:, None] * d.direction
+    out = []
+    for q in corners:
+        axis = (q[2] - q[0]) / np.linalg.norm(q[2] - q[0])
+        parallel = np.abs(d.direction @ axis) > 1 - 1e-6
+        rel = mid - q[0]
+        off = np.linalg.norm(rel - (rel @ axis)[:, None] * axis, axis=1)
+        out.append(bool((parallel & (off < 1e-3)).any()))
+    return np.array(out)
+
+
+def test_thin_wall_strips_rounded_to_float32_have_no_dihedron_on_their_diagonal():
+    """Forty 40 m x 0.3 m sloping strips 300-450 m from the origin, their vertices rounded to
+    float32 as a PLY or Mitsuba file stores them (up to 3e-5 m of rounding at 450 m). Each
+    triangle's corner lies 0.3 m from the diagonal, so the rounding turns its face direction
+    by up to ~1e-4 rad, beyond ``coplanar_angle`` (1e-5 rad): the diagonals became dihedra
+    with n - 1 ~ 1e-5 (spurious diffracting edges, 4,769 of munich's 36,565). Measured as a
+    distance, every corner lies within 1e-4 m of the other triangle's plane, far inside the
+    plane tolerance (1e-6 of the scene's size, 1.4 mm): every diagonal is flat, and the
+    dihedra are exactly the strips' 160 free borders and the ground's 4."""
+    rng = np.random.default_rng(3)
+    r = rng.uniform(300.0, 450.0, 40)
+    t = rng.uniform(0.0, 2 * np.pi, 40)
+    corners = np.array([_strip([ri * np.cos(ti), ri * np.sin(ti), 7.0], yaw, tilt, 40.0, 0.3)
+                        for ri, ti, yaw, tilt in zip(r, t, rng.uniform(0.0, np.pi, 40), rng.uniform(0.2, 1.3, 40))])
+    rounded = corners.astype(np.float32).astype(np.float64)
+    scene = _strips_scene(rounded)
+    # the rounding is there: the strips' two triangles disagree by more than the angle tolerance
+    # (so the polygons stay apart and the angle test alone calls most diagonals folds)
+    a, b = rounded[:, 1] - rounded[:, 0], rounded[:, 2] - rounded[:, 0]
+    c = rounded[:, 3] - rounded[:, 0]
+    n1, n2 = np.cross(a, b), np.cross(b, c)
+    cosang = np.einsum("ij,ij->i", n1, n2) / np.linalg.norm(n1, axis=1) / np.linalg.norm(n2, axis=1)
+    angle = np.arccos(np.clip(cosang, -1, 1))
+    assert (angle > scene.tolerances.coplanar_angle).sum() >= 10, angle
+    assert not _on_diagonal(scene, rounded).any()
+    d = scene.dihedra
+    assert len(d.length) == 4 * 40 + 4
+    assert d.diffracting.all()
+    np.testing.assert_allclose(d.max_sector / np.pi, 2.0, atol=1e-9)  # the free borders: n = 2
+
+
+@pytest.mark.parametrize("factor, folded", [(3.0, True), (0.3, False)])
+def test_a_fold_is_a_dihedron_exactly_when_the_plane_tolerance_resolves_it(factor, folded):
+    """The same strip in float64, its corner 3 lifted off the plane of triangle 0-1-2 by
+    ``factor`` times the plane tolerance (1.4 mm here): at 3x the fold (4e-3 m over the
+    corner's 0.3 m from the diagonal, 0.8 deg) is a diffracting dihedron with n - 1 = fold / pi
+    to 1e-9; at 0.3x the corner could be moved into the plane within the tolerance, and the
+    diagonal is flat."""
+    q = _strip([350.0, 120.0, 7.0], 0.7, 0.5, 40.0, 0.3)
+    scene0 = _strips_scene(q[None])
+    tol = scene0.length_tolerance(scene0.tolerances.plane_distance)
+    normal = np.cross(q[1] - q[0], q[2] - q[0])
+    normal /= np.linalg.norm(normal)
+    q = q.copy()
+    q[3] += factor * tol * normal
+    scene = _strips_scene(q[None])
+    assert scene.length_tolerance(scene.tolerances.plane_distance) == pytest.approx(tol, rel=1e-6)
+    on = _on_diagonal(scene, q[None])[0]
+    assert on == folded
+    if folded:
+        d = scene.dihedra
+        axis = (q[2] - q[0]) / np.linalg.norm(q[2] - q[0])
+        i = int(np.argmax(np.abs(d.direction @ axis)))
+        rel = q[3] - q[0]
+        h = np.linalg.norm(rel - (rel @ axis) * axis)  # the lifted corner's distance from the diagonal
+        fold = np.arcsin(factor * tol / h)
+        assert d.diffracting[i]
+        assert d.max_sector[i] / np.pi - 1 == pytest.approx(fold / np.pi, rel=1e-6)
