@@ -112,3 +112,40 @@ def test_a_fold_is_a_dihedron_exactly_when_the_plane_tolerance_resolves_it(facto
         fold = np.arcsin(factor * tol / h)
         assert d.diffracting[i]
         assert d.max_sector[i] / np.pi - 1 == pytest.approx(fold / np.pi, rel=1e-6)
+
+
+def test_thin_strips_rounded_to_float32_are_one_polygon_each():
+    """The forty float32-rounded strips of the test above: the angle between a strip's two
+    triangles exceeds ``coplanar_angle`` in most of them, so by angle alone each was two
+    polygons (two reflection candidates and a seam per strip). By distance (every corner
+    within ``coplanar_distance``, 1e-7 of the scene's size, of the other triangle's plane)
+    each strip is one polygon, all its vertices within that distance of the polygon's plane."""
+    rng = np.random.default_rng(3)
+    r = rng.uniform(300.0, 450.0, 40)
+    t = rng.uniform(0.0, 2 * np.pi, 40)
+    corners = np.array([_strip([ri * np.cos(ti), ri * np.sin(ti), 7.0], yaw, tilt, 40.0, 0.3)
+                        for ri, ti, yaw, tilt in zip(r, t, rng.uniform(0.0, np.pi, 40), rng.uniform(0.2, 1.3, 40))])
+    scene = _strips_scene(corners.astype(np.float32).astype(np.float64))
+    assert scene.num_polygons == 1 + 40
+    tol = scene.length_tolerance(scene.tolerances.coplanar_distance)
+    for q in range(scene.num_polygons):
+        v = scene.vertices[np.unique(scene.triangles[scene.polygon_triangles(q)])]
+        assert np.abs(v @ scene.polygon_normal[q] - scene.polygon_offset[q]).max() <= tol
+
+
+@pytest.mark.parametrize("factor, polygons", [(3.0, 2), (0.3, 1)])
+def test_a_fold_splits_the_polygon_exactly_when_the_coplanar_distance_resolves_it(factor, polygons):
+    """One float64 strip, its corner 3 lifted off the plane of triangle 0-1-2 by ``factor``
+    times ``coplanar_distance`` (0.18 mm here; the fold is 6e-4 or 6e-5 rad, both beyond
+    ``coplanar_angle``): two polygons at 3x, one at 0.3x. Either way the diagonal is flat
+    (below the plane tolerance, ten times larger)."""
+    q = _strip([350.0, 120.0, 7.0], 0.7, 0.5, 40.0, 0.3)
+    scene0 = _strips_scene(q[None])
+    tol = scene0.length_tolerance(scene0.tolerances.coplanar_distance)
+    normal = np.cross(q[1] - q[0], q[2] - q[0])
+    normal /= np.linalg.norm(normal)
+    q = q.copy()
+    q[3] += factor * tol * normal
+    scene = _strips_scene(q[None])
+    assert scene.num_polygons == 1 + polygons
+    assert not _on_diagonal(scene, q[None])[0]

@@ -17,7 +17,7 @@ triangle. Hence, by definition:
 
 The plane tolerance is :func:`plane_tolerance` (1e-12 of the scene diagonal plus 1e-14 of
 the scene's distance from the origin: above float64 rounding, far below any geometry),
-plus, for a triangle merged into a polygon within ``coplanar_angle``, its corners'
+plus, for a triangle merged into a polygon within ``coplanar_angle`` or ``coplanar_distance``, its corners'
 distance from the polygon's plane (see :class:`~wavepaths.raycast.numpy_caster.ExactSegments`).
 "A point of the closed triangle" is within ``edge_tol`` (1e-12 of the diagonal) inside each
 edge and within the triangle's box grown by ``edge_tol`` (which bounds the tolerance at sharp

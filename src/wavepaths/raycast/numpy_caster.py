@@ -40,7 +40,7 @@ class ExactSegments:
        tolerance on opposite sides: an end on the plane touches it, a segment in the plane
        lies on it. The plane tolerance is :func:`~wavepaths.raycast.plane_tolerance` plus
        the distance of the triangle's corners from its polygon's plane (triangles merged
-       into one polygon within ``coplanar_angle`` are not exactly in its plane, and the
+       into one polygon within ``coplanar_angle`` or ``coplanar_distance`` are not exactly in its plane, and the
        search puts reflection points on the polygon's plane).
     2. The crossing point must lie in the closed triangle: its distance inside each edge
        ``>= -edge_tol`` (``edge_tol`` = 1e-12 of the diagonal: rounding of the recentred

@@ -121,26 +121,60 @@ class _UnionFind:
         self.parent = parent
 
 
-def _split_curved(labels: np.ndarray, normals: np.ndarray, a: np.ndarray, b: np.ndarray,
-                  cos_tolerance: float) -> np.ndarray:
+class _Planes:
+    """Whether triangles lie in the plane of others: by their normals' angle, or by distance.
+
+    ``agree(u, v)`` is true where triangle ``v`` is coplanar with triangle ``u``: their normals
+    within the angle tolerance (parallel or anti-parallel), or, with ``vertices`` given, every
+    corner of ``v`` within ``distance`` [m] of ``u``'s plane. The distance is what float32
+    meshes need: their vertices are rounded to about 6e-8 of the coordinates, which turns the
+    normal of a triangle 0.1 m thin by up to 5e-4 rad but moves no corner off its true plane
+    by more than that rounding (5e-5 m at 800 m).
+    """
+
+    def __init__(self, normals: np.ndarray, cos_tolerance: float, vertices: np.ndarray | None = None,
+                 triangles: np.ndarray | None = None, distance: float = 0.0):
+        self.normals = normals
+        self.cos_tolerance = cos_tolerance
+        self.corners = None if vertices is None or triangles is None else vertices[triangles]  # (f, 3, 3)
+        self.distance = distance
+
+    def agree(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        ok = np.abs(np.einsum("ij,ij->i", self.normals[u], self.normals[v])) >= self.cos_tolerance
+        if self.corners is not None and self.distance > 0.0 and not ok.all():
+            far = ~ok
+            cu, cv, n = self.corners[u[far]], self.corners[v[far]], self.normals[u[far]]
+            off = np.abs(np.einsum("ikj,ij->ik", cv - cu[:, :1, :], n)).max(axis=1)
+            ok[far] = off <= self.distance
+        return ok
+
+
+def _split_curved(labels: np.ndarray, planes: _Planes, a: np.ndarray, b: np.ndarray,
+                  areas: np.ndarray | None = None) -> np.ndarray:
     """Components whose triangles turn by more than the tolerance, split by region growing.
 
-    Joining neighbours whose normals agree chains: a curved surface of small folds (a ground
+    Joining neighbours whose planes agree chains: a curved surface of small folds (a ground
     following the Earth, 7.8e-6 rad per 50 m facet) became one polygon metres off its own
-    plane. In a component where some triangle's normal is farther than the tolerance from its
-    first triangle's, the triangles are regrown from seeds (the lowest index left), each
-    region taking the neighbours (joined pairs ``a``, ``b``) within the tolerance of its seed's
-    normal. Planar components are left as they are.
+    plane. In a component where some triangle is not coplanar (:class:`_Planes`) with its
+    reference triangle (its largest, whose plane the vertices' rounding disturbs least; the
+    first where ``areas`` is not given), the triangles are regrown from seeds (the largest
+    left, the lowest index among equal areas), each region taking the neighbours (joined
+    pairs ``a``, ``b``) coplanar with its seed. Planar components are left as they are.
     """
     f = len(labels)
     if f == 0:
         return labels
-    first = np.full(int(labels.max()) + 1, f, dtype=np.int64)
-    np.minimum.at(first, labels, np.arange(f))
-    off = np.abs(np.einsum("ij,ij->i", normals, normals[first[labels]])) < cos_tolerance
+    rank = np.arange(f) if areas is None else np.empty(f, dtype=np.int64)
+    if areas is not None:
+        rank[np.lexsort((np.arange(f), -areas))] = np.arange(f)  # 0 for the largest triangle
+    best = np.full(int(labels.max()) + 1, f, dtype=np.int64)
+    np.minimum.at(best, labels, rank)
+    by_rank = np.argsort(rank)
+    ref = by_rank[best[labels]]
+    off = ~planes.agree(ref, np.arange(f))
     if not off.any():
         return labels
-    bad = np.zeros(len(first), dtype=bool)
+    bad = np.zeros(len(best), dtype=bool)
     bad[labels[off]] = True
     inside = bad[labels]
     pick = inside[a] & inside[b]
@@ -151,17 +185,16 @@ def _split_curved(labels: np.ndarray, normals: np.ndarray, a: np.ndarray, b: np.
     out = labels.copy()
     fresh = int(labels.max()) + 1
     done = ~inside
-    for seed in np.flatnonzero(inside).tolist():
+    for seed in by_rank[inside[by_rank]].tolist():
         if done[seed]:
             continue
-        n0 = normals[seed]
         done[seed] = True
         out[seed] = fresh
         stack = [seed]
         while stack:
             u = stack.pop()
             for v in neighbours.get(u, ()):
-                if not done[v] and abs(float(normals[v] @ n0)) >= cos_tolerance:
+                if not done[v] and planes.agree(np.array([seed]), np.array([v]))[0]:
                     done[v] = True
                     out[v] = fresh
                     stack.append(v)
@@ -174,12 +207,19 @@ def coplanar_components(
     normals: np.ndarray,
     group: np.ndarray,
     cos_tolerance: float,
+    vertices: np.ndarray | None = None,
+    triangles: np.ndarray | None = None,
+    distance: float = 0.0,
+    areas: np.ndarray | None = None,
 ) -> np.ndarray:
     """Label the connected sets of coplanar triangles with the same ``group``.
 
     Two triangles are joined when they share an edge, carry the same ``group`` value
     (object and material) and their normals are parallel or anti-parallel within the
-    tolerance (a shared edge then puts them in one plane).
+    tolerance (a shared edge then puts them in one plane), or, with ``vertices`` and
+    ``triangles`` given, when the corners of the one nearer the shared edge lie within
+    ``distance`` [m] of the other's plane (float32 rounding turns a thin triangle's normal,
+    not its corners: :class:`_Planes`). Components that turn are regrown (:func:`_split_curved`).
 
     Parameters
     ----------
@@ -188,6 +228,13 @@ def coplanar_components(
     group : (f,) int64
     cos_tolerance : float
         ``cos`` of the largest angle between normals still called coplanar.
+    vertices, triangles : (v, 3) float64, (f, 3) int64, optional
+        The mesh, for the distance test.
+    distance : float
+        [m] The largest distance of a corner from the other triangle's plane still called
+        coplanar (0: the angle alone).
+    areas : (f,) float64, optional
+        Triangle areas: the largest triangle of a component is its reference plane.
 
     Returns
     -------
@@ -207,17 +254,26 @@ def coplanar_components(
             for j in range(i + 1, k):
                 pairs_a.append(block[:, i])
                 pairs_b.append(block[:, j])
+    planes = _Planes(normals, cos_tolerance, vertices, triangles, distance)
     uf = _UnionFind(f)
     a = b = np.zeros(0, np.int64)
     if pairs_a:
         a = np.concatenate(pairs_a)
         b = np.concatenate(pairs_b)
-        keep = (group[a] == group[b]) & (np.abs(np.einsum("ij,ij->i", normals[a], normals[b])) >= cos_tolerance)
+        a, b = a[group[a] == group[b]], b[group[a] == group[b]]
+        if planes.corners is not None:
+            # the taller triangle (farther corner from the shared edge: the larger area over the
+            # same base) is the reference plane, the other's corners are measured against it
+            tall = areas[a] >= areas[b] if areas is not None else np.ones(len(a), dtype=bool)
+            u, v = np.where(tall, a, b), np.where(tall, b, a)
+        else:
+            u, v = a, b
+        keep = planes.agree(u, v)
         a, b = a[keep], b[keep]
         uf.union_pairs(a, b)
     roots = uf.find_all()
     _, labels = np.unique(roots, return_inverse=True)
-    labels = _split_curved(labels.astype(np.int64), normals, a, b, cos_tolerance)
+    labels = _split_curved(labels.astype(np.int64), planes, a, b, areas)
     # renumber by first occurrence so labels are stable and readable
     first = np.full(labels.max() + 1 if f else 0, f, dtype=np.int64)
     np.minimum.at(first, labels, np.arange(f))

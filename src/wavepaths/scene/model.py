@@ -295,7 +295,8 @@ def build_scene(
     normals, areas = triangle_normals(welded, triangles)
     incidence = edge_incidence(triangles)
     group = triangle_object * (int(triangle_material.max()) + 1) + triangle_material
-    labels = coplanar_components(incidence, normals, group, np.cos(tol.coplanar_angle))
+    labels = coplanar_components(incidence, normals, group, np.cos(tol.coplanar_angle), welded, triangles,
+                                 tol.coplanar_distance * diagonal, areas)
     p = int(labels.max()) + 1
 
     order = np.argsort(labels, kind="stable")

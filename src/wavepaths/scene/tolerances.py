@@ -28,6 +28,13 @@ class SceneTolerances:
         Two triangles are coplanar when their normals differ by less than this angle
         [rad]. Normals computed from float32 vertices of a long thin triangle can deviate
         by ~1e-6 rad; 1e-5 rad keeps distinct facets of curved objects apart.
+    coplanar_distance : float
+        Two adjacent triangles are also coplanar when the corners of the smaller lie within
+        ``coplanar_distance * diagonal`` of the larger's plane. Float32 rounding (about 6e-8 of
+        the coordinates) turns a thin triangle's normal beyond ``coplanar_angle`` (a wall's
+        diagonal triangles, 0.1 m thin, by up to 5e-4 rad) but moves its corners off the plane
+        by no more than itself: 1e-7 covers it (0.2 mm in a 2 km scene), and a curved ground's
+        regions stay within it of their planes.
     plane_distance : float
         A point lies in a plane when within ``plane_distance * diagonal`` of it (used to
         find edges lying inside another object's face, and to call an edge flat when its
@@ -44,5 +51,6 @@ class SceneTolerances:
 
     weld: float = 1e-6
     coplanar_angle: float = 1e-5
+    coplanar_distance: float = 1e-7
     plane_distance: float = 1e-6
     ray_offset: float = 1e-6
