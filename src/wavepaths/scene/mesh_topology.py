@@ -185,16 +185,35 @@ def _split_curved(labels: np.ndarray, planes: _Planes, a: np.ndarray, b: np.ndar
     out = labels.copy()
     fresh = int(labels.max()) + 1
     done = ~inside
+    # the same test as _Planes.agree, one pair at a time on Python floats (a curved terrain of
+    # 10^5 triangles visits each of them a few times)
+    rows = np.flatnonzero(inside)
+    keys = rows.tolist()
+    normals = dict(zip(keys, planes.normals[rows].tolist()))
+    corners = None
+    if planes.corners is not None and planes.distance > 0.0:
+        corners = dict(zip(keys, planes.corners[rows].reshape(-1, 9).tolist()))
+    cos_tol, dist = planes.cos_tolerance, planes.distance
     for seed in by_rank[inside[by_rank]].tolist():
         if done[seed]:
             continue
         done[seed] = True
         out[seed] = fresh
+        n0, n1, n2 = normals[seed]
+        p0, p1, p2 = corners[seed][:3] if corners is not None else (0.0, 0.0, 0.0)
         stack = [seed]
         while stack:
             u = stack.pop()
             for v in neighbours.get(u, ()):
-                if not done[v] and planes.agree(np.array([seed]), np.array([v]))[0]:
+                if done[v]:
+                    continue
+                m0, m1, m2 = normals[v]
+                ok = abs(n0 * m0 + n1 * m1 + n2 * m2) >= cos_tol
+                if not ok and corners is not None:
+                    c = corners[v]
+                    ok = max(abs((c[i] - p0) * n0 + (c[i + 1] - p1) * n1 + (c[i + 2] - p2) * n2)
+                             for i in (0, 3, 6)) <= dist
+                if ok:
                     done[v] = True
                     out[v] = fresh
                     stack.append(v)
