@@ -279,7 +279,8 @@ def coplanar_components(
     if pairs_a:
         a = np.concatenate(pairs_a)
         b = np.concatenate(pairs_b)
-        a, b = a[group[a] == group[b]], b[group[a] == group[b]]
+        same = group[a] == group[b]
+        a, b = a[same], b[same]
         if planes.corners is not None:
             # the taller triangle (farther corner from the shared edge: the larger area over the
             # same base) is the reference plane, the other's corners are measured against it
