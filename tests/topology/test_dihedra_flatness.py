@@ -149,3 +149,41 @@ def test_a_fold_splits_the_polygon_exactly_when_the_coplanar_distance_resolves_i
     scene = _strips_scene(q[None])
     assert scene.num_polygons == 1 + polygons
     assert not _on_diagonal(scene, q[None])[0]
+
+
+@pytest.mark.parametrize("factor, diffracts", [(3.0, True), (0.5, False)])
+def test_a_facade_continued_by_a_narrow_block_diffracts_only_past_the_plane_tolerance(factor, diffracts):
+    """A 10 m cube and a 0.5 m wide block against it, whose facade continues the cube's
+    (y = 0) but ends ``factor`` plane tolerances behind it: the vertical edge between them
+    carries four faces (two facades, two party walls), and its widest sector, on the street
+    side, is pi plus the facades' angle (``factor`` * 2e-5 m over 0.5 m, 2e-5 or 1.2e-4 rad,
+    both beyond ``coplanar_angle``). At 0.5 tolerances the facades are coplanar by distance
+    and the edge does not diffract (it had n - 1 = 6e-6: float32 rounding left 226 such edges
+    in munich); at 3 tolerances it diffracts, with n - 1 = angle / pi. No D path then uses it."""
+    from wavepaths.scene.builtin import SceneBuilder
+    from wavepaths.search import TraceOptions, trace
+
+    def blocks(dy):
+        b = SceneBuilder()
+        b.add_prism("cube", PEC, [(0, 0), (10, 0), (10, 10), (0, 10)], 10.0)
+        b.add_prism("block", PEC, [(10, 0), (10.5, dy), (10.5, 10), (10, 10)], 10.0)
+        return build_scene(*b.arrays())
+
+    scene0 = blocks(0.0)
+    tol = scene0.length_tolerance(scene0.tolerances.plane_distance)
+    dy = factor * tol
+    scene = blocks(dy)
+    assert scene.length_tolerance(scene.tolerances.plane_distance) == pytest.approx(tol, rel=1e-6)
+    d = scene.dihedra
+    on = np.flatnonzero((np.linalg.norm(d.origin[:, :2] - [10.0, 0.0], axis=1) < 1e-9)
+                        & (np.abs(d.direction[:, 2]) > 0.999))
+    assert len(on) == 1
+    i = int(on[0])
+    assert d.faces_per_dihedron[i] == 4
+    angle = np.arctan2(dy, 0.5)
+    assert d.max_sector[i] - np.pi == pytest.approx(angle, rel=1e-6)
+    assert bool(d.diffracting[i]) == diffracts
+    p = trace(scene, np.array([[5.0, -20.0, 5.0]]), np.array([[30.0, -2.0, 5.0]]),
+              TraceOptions(max_reflections=0, diffraction=True, diffraction_reflections=0))
+    uses = [k for k in range(len(p)) if p.depth[k] == 1 and p.primitive[k, 0] == i]
+    assert (len(uses) > 0) == diffracts
