@@ -54,6 +54,31 @@ def _on_diagonal(scene, corners: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
+def _rounded_strips() -> np.ndarray:
+    """Forty 40 m x 0.3 m sloping strips 300-450 m from the origin (random, seed 3), their
+    vertices rounded to float32: (40, 4, 3)."""
+    rng = np.random.default_rng(3)
+    r = rng.uniform(300.0, 450.0, 40)
+    t = rng.uniform(0.0, 2 * np.pi, 40)
+    corners = np.array([_strip([ri * np.cos(ti), ri * np.sin(ti), 7.0], yaw, tilt, 40.0, 0.3)
+                        for ri, ti, yaw, tilt in zip(r, t, rng.uniform(0.0, np.pi, 40), rng.uniform(0.2, 1.3, 40))])
+    return corners.astype(np.float32).astype(np.float64)
+
+
+def _lifted_strip(tolerance: str, factor: float):
+    """One float64 strip with its corner 3 lifted off the plane of triangle 0-1-2 by ``factor``
+    times the scene's tolerance named ``tolerance`` [m]: (corners (4, 3), scene, that tolerance)."""
+    q = _strip([350.0, 120.0, 7.0], 0.7, 0.5, 40.0, 0.3)
+    scene0 = _strips_scene(q[None])
+    tol = scene0.length_tolerance(getattr(scene0.tolerances, tolerance))
+    normal = np.cross(q[1] - q[0], q[2] - q[0])
+    q = q.copy()
+    q[3] += factor * tol * normal / np.linalg.norm(normal)
+    scene = _strips_scene(q[None])
+    assert scene.length_tolerance(getattr(scene.tolerances, tolerance)) == pytest.approx(tol, rel=1e-6)
+    return q, scene, tol
+
+
 def test_thin_wall_strips_rounded_to_float32_have_no_dihedron_on_their_diagonal():
     """Forty 40 m x 0.3 m sloping strips 300-450 m from the origin, their vertices rounded to
     float32 as a PLY or Mitsuba file stores them (up to 3e-5 m of rounding at 450 m). Each
@@ -63,12 +88,7 @@ def test_thin_wall_strips_rounded_to_float32_have_no_dihedron_on_their_diagonal(
     distance, every corner lies within 1e-4 m of the other triangle's plane, far inside the
     plane tolerance (1e-6 of the scene's size, 1.4 mm): every diagonal is flat, and the
     dihedra are exactly the strips' 160 free borders and the ground's 4."""
-    rng = np.random.default_rng(3)
-    r = rng.uniform(300.0, 450.0, 40)
-    t = rng.uniform(0.0, 2 * np.pi, 40)
-    corners = np.array([_strip([ri * np.cos(ti), ri * np.sin(ti), 7.0], yaw, tilt, 40.0, 0.3)
-                        for ri, ti, yaw, tilt in zip(r, t, rng.uniform(0.0, np.pi, 40), rng.uniform(0.2, 1.3, 40))])
-    rounded = corners.astype(np.float32).astype(np.float64)
+    rounded = _rounded_strips()
     scene = _strips_scene(rounded)
     # the rounding is there: the strips' two triangles disagree by more than the angle tolerance
     # (so the polygons stay apart and the angle test alone calls most diagonals folds)
@@ -92,15 +112,7 @@ def test_a_fold_is_a_dihedron_exactly_when_the_plane_tolerance_resolves_it(facto
     corner's 0.3 m from the diagonal, 0.8 deg) is a diffracting dihedron with n - 1 = fold / pi
     to 1e-9; at 0.3x the corner could be moved into the plane within the tolerance, and the
     diagonal is flat."""
-    q = _strip([350.0, 120.0, 7.0], 0.7, 0.5, 40.0, 0.3)
-    scene0 = _strips_scene(q[None])
-    tol = scene0.length_tolerance(scene0.tolerances.plane_distance)
-    normal = np.cross(q[1] - q[0], q[2] - q[0])
-    normal /= np.linalg.norm(normal)
-    q = q.copy()
-    q[3] += factor * tol * normal
-    scene = _strips_scene(q[None])
-    assert scene.length_tolerance(scene.tolerances.plane_distance) == pytest.approx(tol, rel=1e-6)
+    q, scene, tol = _lifted_strip("plane_distance", factor)
     on = _on_diagonal(scene, q[None])[0]
     assert on == folded
     if folded:
@@ -120,12 +132,7 @@ def test_thin_strips_rounded_to_float32_are_one_polygon_each():
     polygons (two reflection candidates and a seam per strip). By distance (every corner
     within ``coplanar_distance``, 1e-7 of the scene's size, of the other triangle's plane)
     each strip is one polygon, all its vertices within that distance of the polygon's plane."""
-    rng = np.random.default_rng(3)
-    r = rng.uniform(300.0, 450.0, 40)
-    t = rng.uniform(0.0, 2 * np.pi, 40)
-    corners = np.array([_strip([ri * np.cos(ti), ri * np.sin(ti), 7.0], yaw, tilt, 40.0, 0.3)
-                        for ri, ti, yaw, tilt in zip(r, t, rng.uniform(0.0, np.pi, 40), rng.uniform(0.2, 1.3, 40))])
-    scene = _strips_scene(corners.astype(np.float32).astype(np.float64))
+    scene = _strips_scene(_rounded_strips())
     assert scene.num_polygons == 1 + 40
     tol = scene.length_tolerance(scene.tolerances.coplanar_distance)
     for q in range(scene.num_polygons):
@@ -139,14 +146,7 @@ def test_a_fold_splits_the_polygon_exactly_when_the_coplanar_distance_resolves_i
     times ``coplanar_distance`` (0.18 mm here; the fold is 6e-4 or 6e-5 rad, both beyond
     ``coplanar_angle``): two polygons at 3x, one at 0.3x. Either way the diagonal is flat
     (below the plane tolerance, ten times larger)."""
-    q = _strip([350.0, 120.0, 7.0], 0.7, 0.5, 40.0, 0.3)
-    scene0 = _strips_scene(q[None])
-    tol = scene0.length_tolerance(scene0.tolerances.coplanar_distance)
-    normal = np.cross(q[1] - q[0], q[2] - q[0])
-    normal /= np.linalg.norm(normal)
-    q = q.copy()
-    q[3] += factor * tol * normal
-    scene = _strips_scene(q[None])
+    q, scene, _ = _lifted_strip("coplanar_distance", factor)
     assert scene.num_polygons == 1 + polygons
     assert not _on_diagonal(scene, q[None])[0]
 
