@@ -286,9 +286,10 @@ def _coplanar_entries(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, pf:
     finite = np.where(np.isfinite(height), height, -1.0)
     tallest = np.full(num_e, -1.0)
     np.maximum.at(tallest, entry_edge, finite)
-    ref = ptr[:-1].copy()  # the first entry where no entry has a corner
-    idx = np.flatnonzero((finite == tallest[entry_edge]) & (finite >= 0.0))[::-1]
-    ref[entry_edge[idx]] = idx  # reversed: the first of equally tall entries wins
+    idx = np.flatnonzero((finite == tallest[entry_edge]) & (finite >= 0.0))
+    ref = np.full(num_e, len(pf), dtype=np.int64)
+    np.minimum.at(ref, entry_edge[idx], idx)  # the first of equally tall entries
+    ref = np.where(ref < len(pf), ref, ptr[:-1])  # the first entry where no entry has a corner
     p_ref = pf[ref[entry_edge]]
     angle_ok = np.abs(np.einsum("ij,ij->i", pf, p_ref)) >= cos_tol
     off_plane = np.abs(np.einsum("ij,ij->i", pf, np.cross(w[entry_edge], p_ref)))
@@ -316,9 +317,9 @@ def _flat_widest_sector(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, p
     num_e = len(counts)
     e_of = entry_edge[srt]
     widest = np.flatnonzero(gaps == max_sector[e_of])
-    first = np.full(num_e, -1, dtype=np.int64)
-    first[e_of[widest[::-1]]] = widest[::-1]  # the first widest sector of each edge
-    has = (first >= 0) & (counts >= 2)
+    first = np.full(num_e, len(gaps), dtype=np.int64)
+    np.minimum.at(first, e_of[widest], widest)  # the first widest sector of each edge
+    has = (first < len(gaps)) & (counts >= 2)
     e = np.flatnonzero(has)
     p, q = srt[first[e]], srt[nxt[first[e]]]
     hp, hq = height[p], height[q]
