@@ -182,3 +182,26 @@ def test_a_tolerance_map_is_the_same_with_and_without_the_compiled_kernels():
     np.testing.assert_array_equal(maps[0].num_paths, maps[1].num_paths)
     ok = ~maps[0].inside
     np.testing.assert_allclose(maps[0].power_sum[..., ok], maps[1].power_sum[..., ok], rtol=1e-12, atol=0)
+
+
+def test_the_antennas_peak_amplitude_is_sampled_once_per_antenna_not_per_tile():
+    """``tolerance_db`` bounds each candidate with the antennas' peak pattern amplitudes, a
+    65,000-direction sampling of each pattern (about 10 ms). It was sampled twice per tile,
+    which made the street canyon's R2+D1 map with ``tolerance_db=0.1`` slower than without it
+    (0.20 s against 0.16 s, now 0.14-0.15 s; docs/benchmarks.md). A map of eight tiles with two
+    different antennas now samples each once, and a second map none."""
+    from wavepaths.coverage.tolerance import peak_pattern_amplitude
+    from wavepaths.em.antennas import Antenna
+
+    scene = load_scene("street_canyon")
+    grid = PlanarGrid(center=[0.3, 0.7], size=[80, 40], cell_size=4.0, height=1.5)
+    cfg = FieldConfig(3.5e9, tx_antenna=Antenna("tr38901", "V"), rx_antenna=Antenna("dipole", "V"))
+    settings = CoverageOptions(workers=1, threads=1, tile_size=10)
+    peak_pattern_amplitude.cache_clear()
+    m = coverage(scene, [[-60.0, 0.0, 10.0]], grid, TraceOptions(tolerance_db=0.5), fields=cfg, settings=settings)
+    assert m.metadata["cells_traced"] > 7 * 10  # eight tiles or more
+    assert m.stats["tolerance_dropped_candidates"] > 0
+    info = peak_pattern_amplitude.cache_info()
+    assert info.misses == 2 and info.hits >= 2 * 8 - 2
+    coverage(scene, [[-60.0, 0.0, 10.0]], grid, TraceOptions(tolerance_db=0.5), fields=cfg, settings=settings)
+    assert peak_pattern_amplitude.cache_info().misses == 2
