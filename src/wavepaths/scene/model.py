@@ -302,8 +302,16 @@ def build_scene(
     order = np.argsort(labels, kind="stable")
     ptr = np.concatenate([[0], np.cumsum(np.bincount(labels, minlength=p))]).astype(np.int64)
     first_tri = order[ptr[:-1]]
-    # orient each triangle's normal like its polygon's first triangle, then area-weight
-    sign = np.sign(np.einsum("ij,ij->i", normals, normals[first_tri[labels]]))
+    # orient each triangle's normal like its polygon's largest triangle (the first of equal
+    # ones), then area-weight. Not the first triangle: a sliver joined by coplanar_distance may
+    # stand at any angle to the polygon (a 0.1 mm skirt along a ground's border), and by its
+    # normal the ground's triangles of either winding got signs of rounding noise and cancelled
+    largest = np.full(p, len(areas), dtype=np.int64)
+    rank = np.empty(len(areas), dtype=np.int64)
+    rank[np.lexsort((np.arange(len(areas)), -areas))] = np.arange(len(areas))
+    np.minimum.at(largest, labels, rank)
+    ref_tri = np.argsort(rank)[largest]
+    sign = np.sign(np.einsum("ij,ij->i", normals, normals[ref_tri[labels]]))
     sign[sign == 0] = 1.0
     acc = np.zeros((p, 3))
     np.add.at(acc, labels, normals * (sign * areas)[:, None])
