@@ -190,14 +190,16 @@ def test_a_flat_ground_in_many_triangles_is_still_one_polygon():
 def test_a_sliver_joined_by_distance_does_not_turn_its_polygon():
     """A 1 km ground of 128 triangles with mixed winding (every second triangle wound the
     other way) and, listed first, a sliver 0.1 mm tall hanging from its border, at right
-    angles to it: within ``coplanar_distance`` (0.14 mm) of the ground's plane, so one
-    polygon with it. The triangles were oriented by the polygon's first one, the sliver,
-    whose normal is perpendicular to theirs: the signs were rounding noise, the ground's
-    area-weighted normal cancelled to (0, -1, 0) and its reflection was lost (a review's
-    reproducer). Oriented by the largest triangle, the ground stays z = 0 and the reflection
-    has the image method's length."""
+    angles to it: within ``coplanar_distance`` (0.14 mm) of the ground's plane. With the
+    fold cap lifted (``flat_angle`` = 2 rad) it joins the ground's polygon; the triangles were
+    oriented by the polygon's first one, the sliver, whose normal is perpendicular to theirs:
+    the signs were rounding noise, the ground's area-weighted normal cancelled to (0, -1, 0) and
+    its reflection was lost (a review's reproducer). Oriented by the largest triangle, the
+    ground stays z = 0 and the reflection has the image method's length. With the default cap
+    (1e-2 rad) the sliver is a polygon of its own, with the same result."""
     from wavepaths.em.materials import PEC
     from wavepaths.scene import build_scene
+    from wavepaths.scene.tolerances import SceneTolerances
     from wavepaths.search import TraceOptions, trace
 
     n, size = 8, 1000.0
@@ -211,13 +213,15 @@ def test_a_sliver_joined_by_distance_does_not_turn_its_polygon():
             tris += [[a, b, c], [a, d, c]]  # the second triangle of each quad wound the other way
     v = np.vstack([v, [[size / n / 2, 0.0, -1e-4]]])
     tris = np.array([[n + 1, 0, len(v) - 1]] + tris)  # the sliver first
-    s = build_scene(v, tris, np.zeros(len(tris), int), np.zeros(len(tris), int), ["ground"], [PEC])
-    assert s.length_tolerance(s.tolerances.coplanar_distance) > 1e-4
-    assert s.num_polygons == 1  # the sliver is in the ground's polygon
-    assert abs(s.polygon_normal[0][2]) == pytest.approx(1.0, abs=1e-12)
-    assert abs(s.polygon_offset[0]) < 1e-5
     tx, rx = np.array([[300.0, 400.0, 20.0]]), np.array([[700.0, 600.0, 10.0]])
-    p = trace(s, tx, rx, TraceOptions(max_reflections=1, diffraction=False))
-    lengths = sorted(p.segment_lengths.sum(axis=1))
     exact = [np.linalg.norm(tx[0] - rx[0]), np.linalg.norm(tx[0] - rx[0] * [1, 1, -1])]
-    np.testing.assert_allclose(lengths, exact, rtol=1e-9)
+    for tolerances, polygons in ((SceneTolerances(flat_angle=2.0), 1), (SceneTolerances(), 2)):
+        s = build_scene(v, tris, np.zeros(len(tris), int), np.zeros(len(tris), int), ["ground"], [PEC],
+                        tolerances=tolerances)
+        assert s.length_tolerance(s.tolerances.coplanar_distance) > 1e-4
+        assert s.num_polygons == polygons
+        ground = s.triangle_polygon[1]
+        assert abs(s.polygon_normal[ground][2]) == pytest.approx(1.0, abs=1e-12)
+        assert abs(s.polygon_offset[ground]) < 1e-5
+        p = trace(s, tx, rx, TraceOptions(max_reflections=1, diffraction=False))
+        np.testing.assert_allclose(sorted(p.segment_lengths.sum(axis=1)), exact, rtol=1e-9)

@@ -133,16 +133,18 @@ class _Planes:
     """
 
     def __init__(self, normals: np.ndarray, cos_tolerance: float, vertices: np.ndarray | None = None,
-                 triangles: np.ndarray | None = None, distance: float = 0.0):
+                 triangles: np.ndarray | None = None, distance: float = 0.0, cos_fold: float = -1.0):
         self.normals = normals
         self.cos_tolerance = cos_tolerance
         self.corners = None if vertices is None or triangles is None else vertices[triangles]  # (f, 3, 3)
         self.distance = distance
+        self.cos_fold = cos_fold  # the distance test only where the normals agree within this
 
     def agree(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        ok = np.abs(np.einsum("ij,ij->i", self.normals[u], self.normals[v])) >= self.cos_tolerance
+        dot = np.abs(np.einsum("ij,ij->i", self.normals[u], self.normals[v]))
+        ok = dot >= self.cos_tolerance
         if self.corners is not None and self.distance > 0.0 and not ok.all():
-            far = ~ok
+            far = np.flatnonzero(~ok & (dot >= self.cos_fold))
             cu, cv, n = self.corners[u[far]], self.corners[v[far]], self.normals[u[far]]
             off = np.abs(np.einsum("ikj,ij->ik", cv - cu[:, :1, :], n)).max(axis=1)
             ok[far] = off <= self.distance
@@ -193,7 +195,7 @@ def _split_curved(labels: np.ndarray, planes: _Planes, a: np.ndarray, b: np.ndar
     corners = None
     if planes.corners is not None and planes.distance > 0.0:
         corners = dict(zip(keys, planes.corners[rows].reshape(-1, 9).tolist()))
-    cos_tol, dist = planes.cos_tolerance, planes.distance
+    cos_tol, dist, cos_fold = planes.cos_tolerance, planes.distance, planes.cos_fold
     for seed in by_rank[inside[by_rank]].tolist():
         if done[seed]:
             continue
@@ -208,8 +210,9 @@ def _split_curved(labels: np.ndarray, planes: _Planes, a: np.ndarray, b: np.ndar
                 if done[v]:
                     continue
                 m0, m1, m2 = normals[v]
-                ok = abs(n0 * m0 + n1 * m1 + n2 * m2) >= cos_tol
-                if not ok and corners is not None:
+                dot = abs(n0 * m0 + n1 * m1 + n2 * m2)
+                ok = dot >= cos_tol
+                if not ok and corners is not None and dot >= cos_fold:
                     c = corners[v]
                     ok = max(abs((c[i] - p0) * n0 + (c[i + 1] - p1) * n1 + (c[i + 2] - p2) * n2)
                              for i in (0, 3, 6)) <= dist
@@ -230,6 +233,7 @@ def coplanar_components(
     triangles: np.ndarray | None = None,
     distance: float = 0.0,
     areas: np.ndarray | None = None,
+    cos_fold: float = -1.0,
 ) -> np.ndarray:
     """Label the connected sets of coplanar triangles with the same ``group``.
 
@@ -254,6 +258,8 @@ def coplanar_components(
         coplanar (0: the angle alone).
     areas : (f,) float64, optional
         Triangle areas: the largest triangle of a component is its reference plane.
+    cos_fold : float
+        ``cos`` of the largest fold the distance test may join (``flat_angle``; -1: any).
 
     Returns
     -------
@@ -273,7 +279,7 @@ def coplanar_components(
             for j in range(i + 1, k):
                 pairs_a.append(block[:, i])
                 pairs_b.append(block[:, j])
-    planes = _Planes(normals, cos_tolerance, vertices, triangles, distance)
+    planes = _Planes(normals, cos_tolerance, vertices, triangles, distance, cos_fold)
     uf = _UnionFind(f)
     a = b = np.zeros(0, np.int64)
     if pairs_a:

@@ -296,7 +296,7 @@ def build_scene(
     incidence = edge_incidence(triangles)
     group = triangle_object * (int(triangle_material.max()) + 1) + triangle_material
     labels = coplanar_components(incidence, normals, group, np.cos(tol.coplanar_angle), welded, triangles,
-                                 tol.coplanar_distance * diagonal, areas)
+                                 tol.coplanar_distance * diagonal, areas, np.cos(tol.flat_angle))
     p = int(labels.max()) + 1
 
     order = np.argsort(labels, kind="stable")

@@ -258,7 +258,9 @@ def _coplanar_entries(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, pf:
     170 of etoile's 9,094). The measure that this rounding cannot fool is a distance: the
     corner's height above the plane through the edge and the reference face's direction,
     compared with ``plane_distance`` (1e-6 of the scene's size, the tolerance at which a point
-    lies in a plane): moving the corner by less than that makes the faces coplanar. The
+    lies in a plane): moving the corner by less than that makes the faces coplanar, unless
+    they fold by more than ``flat_angle`` (a narrow facet of a faceted curved surface: a real
+    crease, whose corner is near its neighbour's plane only because the facet is narrow). The
     reference is the edge's tallest face (the one whose direction the rounding disturbs least);
     on an edge without corners (every entry a half-face of a polygon the edge runs inside,
     ``height`` inf), its first entry, with the angle test alone.
@@ -292,9 +294,10 @@ def _coplanar_entries(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, pf:
     ref = np.where(ref < len(pf), ref, ptr[:-1])  # the first entry where no entry has a corner
     p_ref = pf[ref[entry_edge]]
     angle_ok = np.abs(np.einsum("ij,ij->i", pf, p_ref)) >= cos_tol
-    off_plane = np.abs(np.einsum("ij,ij->i", pf, np.cross(w[entry_edge], p_ref)))
+    off_plane = np.abs(np.einsum("ij,ij->i", pf, np.cross(w[entry_edge], p_ref)))  # sin of the fold
     tol = scene.length_tolerance(scene.tolerances.plane_distance)
-    return angle_ok | (np.isfinite(height) & (off_plane * np.where(np.isfinite(height), height, 0.0) <= tol))
+    near = (off_plane * np.where(np.isfinite(height), height, 0.0) <= tol) & (off_plane <= np.sin(scene.tolerances.flat_angle))
+    return angle_ok | (np.isfinite(height) & near)
 
 
 def _flat_widest_sector(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, pf: np.ndarray, height: np.ndarray,
@@ -308,7 +311,7 @@ def _flat_widest_sector(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, p
     diffracting dihedron with n - 1 ~ 1e-5 (226 of munich's, 112 of etoile's, every one on an
     edge of three or more faces). The test is :func:`_coplanar_entries`' distance, on the two
     bounding faces: opposite directions, and the corner of the shorter within the plane
-    tolerance of the taller's plane. Bounding faces without corners (half-faces of a polygon
+    tolerance of the taller's plane, folding by at most ``flat_angle``. Bounding faces without corners (half-faces of a polygon
     the edge runs inside) keep the angle test alone.
 
     ``srt`` orders the entries by (edge, angle); ``gaps[i]`` is the sector from entry
@@ -328,7 +331,9 @@ def _flat_widest_sector(scene: "Scene", w: np.ndarray, entry_edge: np.ndarray, p
     ref, other = np.where(tall, p, q), np.where(tall, q, p)
     off = np.abs(np.einsum("ij,ij->i", pf[other], np.cross(w[e], pf[ref]))) * np.where(ok, height[other], 0.0)
     out = np.zeros(num_e, dtype=bool)
-    out[e] = ok & (off <= scene.length_tolerance(scene.tolerances.plane_distance))
+    fold = np.abs(np.einsum("ij,ij->i", pf[other], np.cross(w[e], pf[ref])))
+    out[e] = ok & (off <= scene.length_tolerance(scene.tolerances.plane_distance)) & (
+        fold <= np.sin(scene.tolerances.flat_angle))
     return out
 
 
