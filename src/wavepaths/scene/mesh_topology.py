@@ -151,6 +151,21 @@ class _Planes:
         return ok
 
 
+def area_order(areas: np.ndarray) -> np.ndarray:
+    """(f,) int64: triangle indices from the largest area down, the lowest index first among equals."""
+    return np.lexsort((np.arange(len(areas)), -areas))
+
+
+def largest_per_label(labels: np.ndarray, n: int, order: np.ndarray) -> np.ndarray:
+    """(n,) int64: per label ``0..n-1``, the first of its triangles in ``order`` (:func:`area_order`:
+    its largest triangle)."""
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    best = np.full(n, len(order), dtype=np.int64)
+    np.minimum.at(best, labels, rank)
+    return order[best]
+
+
 def _split_curved(labels: np.ndarray, planes: _Planes, a: np.ndarray, b: np.ndarray,
                   areas: np.ndarray | None = None) -> np.ndarray:
     """Components whose triangles turn by more than the tolerance, split by region growing.
@@ -166,13 +181,9 @@ def _split_curved(labels: np.ndarray, planes: _Planes, a: np.ndarray, b: np.ndar
     f = len(labels)
     if f == 0:
         return labels
-    rank = np.arange(f) if areas is None else np.empty(f, dtype=np.int64)
-    if areas is not None:
-        rank[np.lexsort((np.arange(f), -areas))] = np.arange(f)  # 0 for the largest triangle
-    best = np.full(int(labels.max()) + 1, f, dtype=np.int64)
-    np.minimum.at(best, labels, rank)
-    by_rank = np.argsort(rank)
-    ref = by_rank[best[labels]]
+    by_rank = np.arange(f) if areas is None else area_order(areas)
+    best = largest_per_label(labels, int(labels.max()) + 1, by_rank)
+    ref = best[labels]
     off = ~planes.agree(ref, np.arange(f))
     if not off.any():
         return labels

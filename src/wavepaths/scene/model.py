@@ -16,7 +16,8 @@ import numpy as np
 
 from ..em.materials import Material
 from ..errors import SceneError
-from .mesh_topology import EdgeIncidence, coplanar_components, edge_incidence, triangle_normals
+from .mesh_topology import (EdgeIncidence, area_order, coplanar_components, edge_incidence, largest_per_label,
+                            triangle_normals)
 from .tolerances import SceneTolerances
 from .weld import degenerate_triangles, weld_vertices
 
@@ -306,11 +307,7 @@ def build_scene(
     # ones), then area-weight. Not the first triangle: a sliver joined by coplanar_distance may
     # stand at any angle to the polygon (a 0.1 mm skirt along a ground's border), and by its
     # normal the ground's triangles of either winding got signs of rounding noise and cancelled
-    largest = np.full(p, len(areas), dtype=np.int64)
-    rank = np.empty(len(areas), dtype=np.int64)
-    rank[np.lexsort((np.arange(len(areas)), -areas))] = np.arange(len(areas))
-    np.minimum.at(largest, labels, rank)
-    ref_tri = np.argsort(rank)[largest]
+    ref_tri = largest_per_label(labels, p, area_order(areas))
     sign = np.sign(np.einsum("ij,ij->i", normals, normals[ref_tri[labels]]))
     sign[sign == 0] = 1.0
     acc = np.zeros((p, 3))
