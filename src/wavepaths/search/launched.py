@@ -17,7 +17,13 @@ exhaustive search's own, so a launched path is exactly the path that search find
    then occlusion (or the coverage tolerance's pending list).
 
 What the launched search can miss is what the sampling misses (:mod:`wavepaths.search.launch`);
-what it finds, it finds exactly.
+what it finds, it finds exactly. First-order diffraction without reflections (E-D-R, the
+seed's own case and the strongest diffracted paths) is not sampled: every tile enumerates it
+as the exhaustive search does (:func:`~wavepaths.search.diffraction.diffraction_tile` with
+``a = b = 0``, the receivers themselves as their images), so a launched map has every one of
+those paths. It costs a per-(receiver, dihedron) test over the dihedra the transmitter sees,
+which on munich is a few per cent of a tile's time; the sampled chains are those with a
+reflection, whose pairs are what makes the exhaustive search of munich take days.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import kernels
-from .diffraction import _diffraction_candidates, _diffraction_prefilter
+from .diffraction import _diffraction_candidates, _diffraction_prefilter, diffraction_tile
 from .end_sides import _EndSide, _edge_frame, _sector_in_table, _transmitter_side
 from .geometry import mirror_points
 from .images import ImageLevel
@@ -105,7 +111,9 @@ def shipped_context(ctx: "TxContext") -> "TxContext":
     renumbered = segs.source.copy()
     for a, src in enumerate(ctx.diffraction_sources):
         sel = segs.order == a
-        used = np.unique(segs.source[sel])
+        # order 0 whole: the tiles enumerate the first-order paths without reflections from
+        # every source the transmitter sees (a few thousand on munich), not only those sampled
+        used = np.arange(len(src.chain)) if a == 0 else np.unique(segs.source[sel])
         sources.append(src.take(used))
         renumbered[sel] = np.searchsorted(used, segs.source[sel])
     derived = {k: v for k, v in ctx.derived.items() if not (isinstance(k, tuple) and k[0] == "launch_samples")}
@@ -157,17 +165,23 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
     source's), then the exhaustive search's counters of steps 3 and 4.
     """
     opts = ctx.options
+    out: list[PathBatch] = []
+    if len(ctx.diffraction_sources):
+        # E-D-R, enumerated (module docstring): the receivers are their own order-0 images
+        rx0 = [ImageLevel(np.arange(len(rx), dtype=np.int64), np.zeros((len(rx), 0), np.int64), rx[:, None, :].copy())]
+        out += diffraction_tile(scene, ctx, 0, 0, rx, rx0, rx_offset, stats, grazing, None, pending)
+    Dmax = opts.diffraction_reflections
+    if Dmax == 0:
+        return out
     segments = cached_segments(ctx, ("launch_fans", opts.launch_fan), rx)
     samples = context_samples(scene, ctx) if segments is None else None  # the segments need no samples
     seq = candidate_sequences(scene, ctx, rx, launch_options(ctx), samples, segments)
     stats["launched_candidates"] += len(seq)
-    out: list[PathBatch] = []
-    Dmax = opts.diffraction_reflections
     nb = (seq.after >= 0).sum(axis=1)
     for a in range(Dmax + 1):
         if a >= len(ctx.diffraction_sources):
             break
-        in_a = np.nonzero(seq.order == a)[0]
+        in_a = np.nonzero((seq.order == a) & ((nb > 0) if a == 0 else True))[0]
         if len(in_a) == 0:
             continue
         # the transmitter side of the sources this tile's candidates name (not of all of
@@ -176,7 +190,7 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
         local = np.full(len(seq), -1, np.int64)
         local[in_a] = s_local
         tside = _transmitter_side(scene, ctx, ctx.levels[a], ctx.diffraction_sources[a].take(used))
-        for b in range(Dmax + 1 - a):
+        for b in range(1 if a == 0 else 0, Dmax + 1 - a):
             tag = f"diffraction_{a}r_{b}r"
             sel = np.nonzero((seq.order == a) & (nb == b))[0]
             if len(sel) == 0:

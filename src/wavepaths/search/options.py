@@ -124,6 +124,8 @@ class TraceOptions:
         points carry to each receiver (:mod:`wavepaths.search.launch`), solved by the same
         exact tests (:mod:`wavepaths.search.launched`); far fewer candidates in dense
         scenes, but a sequence the sampling misses is missed (one transmitter per context).
+        First-order diffraction without reflections (E-D-R) is enumerated as in
+        ``"exhaustive"`` in both modes: only the chains with a reflection are sampled.
     launch_fan : int
         With ``"launched"``: Keller-cone directions per turn (denser: thinner tubes, fewer
         candidates, more rays).
