@@ -131,3 +131,19 @@ def test_the_box_prefilter_of_points_inside_closed_changes_no_answer(name, rng, 
     s.__dict__["object_boxes"] = boxes
     monkeypatch.setattr(closed, "BOX_PAIRS", 7)
     np.testing.assert_array_equal(points_inside_closed(s, pts), ref)
+
+
+def test_the_solid_objects_are_computed_once_per_scene_and_read_only():
+    """Every coverage tile asks which objects are solids (through its receivers' image trees);
+    the answer is the scene's, computed once: the box of box_on_ground is a solid, its ground
+    is not, and the cached mask cannot be changed by a caller."""
+    from wavepaths.scene.closed import compute_solid_objects_mask, solid_objects_mask
+
+    scene = load_scene("box_on_ground")
+    mask = solid_objects_mask(scene)
+    assert mask is solid_objects_mask(scene) and not mask.flags.writeable
+    np.testing.assert_array_equal(mask, compute_solid_objects_mask(scene))
+    names = list(scene.object_names)
+    assert mask[names.index("box")] and not mask[names.index("ground")]
+    with pytest.raises(ValueError):
+        mask[0] = not mask[0]

@@ -66,10 +66,17 @@ def _signed_volume(scene: "Scene", o: int) -> float:
 
 
 def solid_objects_mask(scene: "Scene") -> np.ndarray:
-    """(objects,) bool: closed objects that enclose a volume (not a double-sided sheet).
+    """(objects,) bool, read-only: closed objects that enclose a volume (not a double-sided
+    sheet). Computed once per scene (:attr:`Scene.solid_objects`): every coverage tile asks
+    for it through the receivers' image trees, and its half-edge count sorts every edge of
+    the scene."""
+    return scene.solid_objects
 
-    A closed surface thinner than ``plane_distance`` everywhere (the same quad twice with
-    opposite orientations) has a signed volume below ``plane_distance`` times its area.
+
+def compute_solid_objects_mask(scene: "Scene") -> np.ndarray:
+    """:func:`solid_objects_mask`, computed. A closed surface thinner than ``plane_distance``
+    everywhere (the same quad twice with opposite orientations) has a signed volume below
+    ``plane_distance`` times its area.
     """
     closed = closed_objects(scene)
     tol = scene.length_tolerance(scene.tolerances.plane_distance)

@@ -180,6 +180,15 @@ class Scene:
         return polygon_sides(self)
 
     @functools.cached_property
+    def solid_objects(self) -> np.ndarray:
+        """(objects,) bool, read-only: the closed objects that enclose a volume (not a double-sided sheet)."""
+        from .closed import compute_solid_objects_mask
+
+        mask = compute_solid_objects_mask(self)
+        mask.setflags(write=False)
+        return mask
+
+    @functools.cached_property
     def outward_sign(self) -> np.ndarray:
         """(p,) float64: +1/-1 if a polygon reflects only on its normal's side/the other side, 0 if on both."""
         from .closed import outward_polygon_sign
