@@ -7,7 +7,9 @@ R-R-D, R-D-R, D-R-R), then, for each fan density, the candidate sequences that t
 fans carry to each receiver. Reported per fan density: the time of the edge samples and of
 the fans, the candidates per receiver, and which of the exhaustive paths' sequences are
 among them, counted per (reflections before, after) and weighted by the paths' power
-(UTD fields at 3.5 GHz), beside the exhaustive search's own candidate count.
+(UTD fields at 3.5 GHz), beside the exhaustive search's own candidate count. The E-D-R
+sequences (``0R-D-0R``) count as found: the launched tiles enumerate them
+(:mod:`wavepaths.search.launched`), the fans no longer carry them.
 """
 
 from __future__ import annotations
@@ -90,7 +92,8 @@ def launch_completeness(scene_name: str, tx, cells: int = 32, fans=(64, 256, 102
         got_power = 0.0
         missed = []
         for key, ab, p in ref:
-            hit = key in keys
+            # E-D-R (0R-D-0R) sequences are enumerated by the launched tiles, not sampled
+            hit = ab == (0, 0) or key in keys
             x = per.setdefault(f"{ab[0]}R-D-{ab[1]}R", [0, 0])
             x[0] += 1
             x[1] += hit

@@ -402,7 +402,12 @@ def fan_segments(scene: "Scene", ctx: "TxContext", lo: np.ndarray, hi: np.ndarra
             t1 = travelled + dist
             r0, r1 = base + grow_r * travelled, base + grow_r * t1
             s0, s1 = base + grow_s * travelled, base + grow_s * t1
-            keep = np.nonzero(reaches_box(origin, end, np.maximum(r0, s0), np.maximum(r1, s1), lo, hi))[0]
+            reach = reaches_box(origin, end, np.maximum(r0, s0), np.maximum(r1, s1), lo, hi)
+            if b == 0:
+                # a first leg from an order-0 sample carries E-D-R, which the tiles enumerate
+                # (wavepaths.search.launched): only its reflections are kept
+                reach &= samples.order[sample] > 0
+            keep = np.nonzero(reach)[0]
             if len(keep):
                 f32 = np.float32  # stored as float32 at once: munich keeps 6 M segments
                 parts.append(((origin[keep] - centre).astype(f32), (end[keep] - centre).astype(f32),
