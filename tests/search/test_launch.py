@@ -164,8 +164,9 @@ def _path_keys(paths) -> dict:
 def test_the_launched_search_finds_the_paths_of_the_exhaustive_one(canyon):
     """``diffraction_candidates="launched"`` on the street canyon at R2+D2: the same paths
     (interactions and primitives per receiver) as the exhaustive search, at the same
-    vertices (1e-9 m), from fewer diffracted candidates; a sparse fan loses some paths
-    but finds no path the exhaustive search does not (the tests are the exact ones)."""
+    vertices (1e-9 m), from fewer diffracted candidates carried by the fans than the
+    exhaustive search joins (the launched tiles also enumerate E-D-R); a sparse fan loses
+    some paths but finds no path the exhaustive search does not (the tests are the exact ones)."""
     from wavepaths.search import trace
 
     scene, _, pts, _ = canyon
@@ -340,8 +341,9 @@ def test_fans_traced_once_for_a_box_give_each_subset_its_own_candidates(canyon):
 
 def test_the_shipped_context_holds_only_the_named_sources_and_finds_the_same_paths(canyon):
     """What a launched map sends its workers (:func:`shipped_context`): the diffraction
-    sources cut to those the cached fans name, the segments renumbered, no edge samples;
-    its tiles find exactly the paths of the full context."""
+    sources with reflections before the edge cut to those the cached fans name, the order-0
+    sources whole (the tiles enumerate E-D-R over every edge the transmitter sees), the
+    segments renumbered, no edge samples; its tiles find exactly the paths of the full context."""
     import dataclasses
 
     from wavepaths.search.launched import prepare_launched, shipped_context
@@ -353,6 +355,8 @@ def test_the_shipped_context_holds_only_the_named_sources_and_finds_the_same_pat
     n_full = sum(len(s.dihedron) for s in full.diffraction_sources)
     n_ship = sum(len(s.dihedron) for s in ship.diffraction_sources)
     assert 0 < n_ship < n_full
+    np.testing.assert_array_equal(ship.diffraction_sources[0].dihedron, full.diffraction_sources[0].dihedron)
+    np.testing.assert_array_equal(ship.diffraction_sources[0].chain, full.diffraction_sources[0].chain)
     assert not any(isinstance(k, tuple) and k[0] == "launch_samples" for k in ship.derived)
     got = {}
     for c in (full, ship):

@@ -67,10 +67,10 @@ def _signed_volume(scene: "Scene", o: int) -> float:
 
 def solid_objects_mask(scene: "Scene") -> np.ndarray:
     """(objects,) bool, read-only: closed objects that enclose a volume (not a double-sided
-    sheet). Computed once per scene (:attr:`Scene.solid_objects`): every coverage tile asks
+    sheet). Computed once per scene (:attr:`Scene.solid_object_mask`): every coverage tile asks
     for it through the receivers' image trees, and its half-edge count sorts every edge of
     the scene."""
-    return scene.solid_objects
+    return scene.solid_object_mask
 
 
 def compute_solid_objects_mask(scene: "Scene") -> np.ndarray:

@@ -180,8 +180,10 @@ class Scene:
         return polygon_sides(self)
 
     @functools.cached_property
-    def solid_objects(self) -> np.ndarray:
-        """(objects,) bool, read-only: the closed objects that enclose a volume (not a double-sided sheet)."""
+    def solid_object_mask(self) -> np.ndarray:
+        """(objects,) bool, read-only in this process: the closed objects that enclose a volume
+        (not a double-sided sheet). :func:`wavepaths.coverage.inside.solid_objects` is their
+        triangles, for the inside tests."""
         from .closed import compute_solid_objects_mask
 
         mask = compute_solid_objects_mask(self)

@@ -16,15 +16,17 @@ instead, by sampling, in three steps:
    the same window, is lit. No transmitter rays are launched: the sources and windows are
    the exact engine's, so no edge is missed for being seen at a grazing angle; a lit stretch
    shorter than the spacing whose samples on either side are both hidden starts no fan (an
-   edge seen only through a slit narrower than the spacing: ``tests/search/test_launch.py``,
-   a strict expected failure). The spacing is absolute (0.25 m): on room-sized scenes the
+   edge seen only through a slit narrower than the spacing: its D-R paths are missed,
+   ``tests/search/test_launch.py``, a strict expected failure; its E-D-R paths are enumerated). The spacing is absolute (0.25 m): on room-sized scenes the
    exhaustive search, the default, is the one to use.
 2. **Keller fans** (:func:`fan_segments`, once for the box of the query points). From
    every kept sample, ``fan`` rays on the Keller cone of the incident direction (seed
    §2.1: ``v . w = u . w``), in the wedge's exterior, are traced through up to ``D - a``
    specular reflections (first hits from the ray caster, reflected in float64). The
    segments whose tubes may reach the box are kept (float32, recentred): a coverage map
-   traces its fans once for all its tiles.
+   traces its fans once for all its tiles. The first leg of an order-0 sample's ray is not
+   kept: it carries an E-D-R sequence, which the tiles enumerate
+   (:mod:`wavepaths.search.launched`); its reflections are.
 3. **Tubes** (:func:`candidate_sequences`, per set of points). Every segment carries its
    sequence (mirrors before, dihedron, mirrors after so far) to the query points within
    its tube. The tube is an ellipse in cross-section: ``radius_factor`` times the fan's

@@ -128,7 +128,9 @@ KNOWN_DISAGREEMENTS = [
                   "recorded one (1.65e-3, where Sionna's float32 points give at most 2.6e-6 on the run's other "
                   "diffracted paths); the recorded reflection breaks the law of reflection by 1.7e-3. wavepaths' "
                   "path on the recorded facade obeys both to 2e-16. The report names such a path by that test "
-                  "(validation.disagreements._sionna_mirror_substitution; tests/validation/test_unmatched_reasons.py).",
+                  "(validation.disagreements._sionna_mirror_substitution), which "
+                  "tests/validation/test_unmatched_reasons.py checks on a made-up path of the same kind; benchmark 2 "
+                  "counts the Sionna paths it names on etoile_crop (1 in the twenty-seventh session's run).",
         "who_matches_exact": "wavepaths (Keller's law and the law of reflection on the recorded mirror)",
     },
     {
