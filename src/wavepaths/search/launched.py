@@ -173,8 +173,8 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
     out: list[PathBatch] = []
     if len(ctx.diffraction_sources):
         # E-D-R, enumerated (module docstring): the receivers are their own order-0 images
-        rx0 = [ImageLevel(np.arange(len(rx), dtype=np.int64), np.zeros((len(rx), 0), np.int64), rx[:, None, :].copy())]
-        out += diffraction_tile(scene, ctx, 0, 0, rx, rx0, rx_offset, stats, grazing, None, pending)
+        rx0 = receiver_images(scene, rx, np.arange(len(rx), dtype=np.int64), np.zeros((len(rx), 0), np.int64))
+        out += diffraction_tile(scene, ctx, 0, 0, rx, [rx0], rx_offset, stats, grazing, None, pending)
     Dmax = opts.diffraction_reflections
     if Dmax == 0:
         return out
@@ -186,7 +186,7 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
     for a in range(Dmax + 1):
         if a >= len(ctx.diffraction_sources):
             break
-        in_a = np.nonzero((seq.order == a) & ((nb > 0) if a == 0 else True))[0]
+        in_a = np.nonzero(seq.order == a)[0]
         if len(in_a) == 0:
             continue
         # the transmitter side of the sources this tile's candidates name (not of all of
@@ -195,7 +195,7 @@ def launched_diffraction(scene: "Scene", ctx: "TxContext", rx: np.ndarray, rx_of
         local = np.full(len(seq), -1, np.int64)
         local[in_a] = s_local
         tside = _transmitter_side(scene, ctx, ctx.levels[a], ctx.diffraction_sources[a].take(used))
-        for b in range(1 if a == 0 else 0, Dmax + 1 - a):
+        for b in range(1 if a == 0 else 0, Dmax + 1 - a):  # E-D-R: enumerated above, not from the fans
             tag = f"diffraction_{a}r_{b}r"
             sel = np.nonzero((seq.order == a) & (nb == b))[0]
             if len(sel) == 0:

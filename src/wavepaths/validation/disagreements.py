@@ -216,11 +216,6 @@ RESTORED_FACTOR = 100.0
 nearby plane (etoile_crop: 1.65e-3 -> 6.4e-8; a D-R-R 0.09 mrad apart: 7.9e-5 -> 1.9e-8)."""
 
 
-def _reflect_through(x: np.ndarray, n: np.ndarray, off: float) -> np.ndarray:
-    """The mirror image of ``x`` in the plane n.x = off (n a unit vector)."""
-    return x - 2.0 * (x @ n - off) * n
-
-
 def _image_keller_residual(scene, v: np.ndarray, k: int, mirrors: list, edges: np.ndarray) -> float:
     """min over the dihedra ``edges`` of |e.u_in - e.u_out| at the diffraction point ``v[k + 1]``
     of a path with vertices ``v`` (transmitter, interactions, receiver) whose interaction ``k``
@@ -229,12 +224,14 @@ def _image_keller_residual(scene, v: np.ndarray, k: int, mirrors: list, edges: n
     mirrors before the point (seed §2.3, unfolded), the outgoing one at the receiver's image in
     the mirrors after it. The images, unlike the neighbouring vertices, carry no float32
     rounding of a reflection point next to the edge."""
+    from ..search.geometry import mirror_points
+
     n, off = scene.polygon_normal, scene.polygon_offset
     src, tgt = v[0], v[-1]
     for m in range(k):
-        src = _reflect_through(src, n[mirrors[m]], off[mirrors[m]])
+        src = mirror_points(src, n[mirrors[m]], off[mirrors[m]])
     for m in range(len(mirrors) - 1, k, -1):
-        tgt = _reflect_through(tgt, n[mirrors[m]], off[mirrors[m]])
+        tgt = mirror_points(tgt, n[mirrors[m]], off[mirrors[m]])
     p = v[k + 1]
     u_in, u_out = (p - src) / np.linalg.norm(p - src), (tgt - p) / np.linalg.norm(tgt - p)
     e = scene.dihedra.direction[edges]
