@@ -95,7 +95,7 @@ def test_aperture_window_holds_every_point_the_back_trace_accepts():
     diffracting edge of the street canyon, 41 points per edge): where the image method's
     back-trace finds a reflection point on the last mirror, the point lies in the window."""
     from wavepaths.search.images import backtrace, build_image_levels
-    from wavepaths.search.visibility import aperture_windows
+    from wavepaths.search.aperture_windows import aperture_windows
 
     scene = load_scene("street_canyon")
     dh = scene.dihedra
@@ -127,7 +127,7 @@ def test_chain_aperture_windows_are_the_per_pair_windows(compiled):
     edge of the street canyon)."""
     from wavepaths.search import kernels
     from wavepaths.search.images import build_image_levels
-    from wavepaths.search.visibility import aperture_windows, chain_aperture_windows
+    from wavepaths.search.aperture_windows import aperture_windows, chain_aperture_windows
 
     if compiled and not kernels.available():
         pytest.skip("numba (the `fast` extra) is not installed")
@@ -152,7 +152,7 @@ def _order_1_pairs_with_apertures(scene, tx):
     """The transmitters' order-1 images and every (image, diffracting edge) pair with a
     non-empty aperture window: ``(level, chain, dihedron, lo, hi)``."""
     from wavepaths.search.images import build_image_levels
-    from wavepaths.search.visibility import aperture_windows
+    from wavepaths.search.aperture_windows import aperture_windows
 
     d_all = np.nonzero(scene.dihedra.diffracting)[0]
     lv = build_image_levels(scene, tx, 1, True)[1]
@@ -302,7 +302,7 @@ def test_two_mirror_windows_hold_every_point_the_full_back_trace_accepts(scene_n
     point lies in the window (within tau). Not vacuous: the second mirror empties windows
     the last one alone leaves open."""
     from wavepaths.search.images import backtrace, build_image_levels
-    from wavepaths.search.visibility import chain_aperture_windows
+    from wavepaths.search.aperture_windows import chain_aperture_windows
 
     if scene_name == "street_canyon":
         scene = load_scene("street_canyon")
@@ -338,7 +338,7 @@ def test_compiled_two_mirror_windows_are_the_numpy_ones():
     almost parallel to the edge amplifies the rounding; the windows' margins are larger)."""
     from wavepaths.search import kernels
     from wavepaths.search.images import build_image_levels
-    from wavepaths.search.visibility import chain_aperture_windows
+    from wavepaths.search.aperture_windows import chain_aperture_windows
 
     if not kernels.available():
         pytest.skip("numba (the `fast` extra) is not installed")

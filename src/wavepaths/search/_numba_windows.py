@@ -1,5 +1,6 @@
-"""The numba twins of :mod:`wavepaths.search.visibility`'s window loops (imported only when
-numba is installed; the numpy functions named in each comment are the references)."""
+"""The numba twins of the window loops of :mod:`wavepaths.search.visibility` and
+:mod:`wavepaths.search.aperture_windows` (imported only when numba is installed; the numpy
+functions named in each comment are the references)."""
 
 import math
 
@@ -19,7 +20,7 @@ def _half_line(alpha, beta, lo, hi):
 
 @numba.njit(cache=True, nogil=True)
 def windows_through(ptr, N, O, eps, valid, whole, I, center, image, d, origin, direction, length, tau, lo, hi):
-    # visibility.windows_through (numpy reference), pair by pair: for pair i (image row
+    # aperture_windows.windows_through (numpy reference), pair by pair: for pair i (image row
     # image[i] of the planes, dihedron d[i]) the hull over the image's mirror triangles of the
     # t in [0, L] meeting their four half-spaces alpha + beta t >= 0, widened by tau
     for i in range(len(d)):

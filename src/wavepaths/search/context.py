@@ -33,7 +33,8 @@ from .apertures import Apertures, scene_apertures
 from .beams import LazyChainBeams, chains_meeting_edges, edge_tree
 from .images import ImageLevel, build_image_levels
 from .options import TraceOptions
-from .visibility import VisibilityWindows, chain_aperture_windows, visibility_windows
+from .aperture_windows import chain_aperture_windows
+from .visibility import VisibilityWindows, visibility_windows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
@@ -57,7 +58,7 @@ class DiffractionSources:
         Per pair, the part of the edge its incident leg may reach: at order 0, the part
         not proven hidden from the transmitter (:func:`~wavepaths.search.visibility.visibility_windows`);
         at order >= 1, where a leg from the edge to the image can cross the last mirror
-        (:func:`~wavepaths.search.visibility.aperture_windows`). Pairs whose window is
+        (:func:`~wavepaths.search.aperture_windows.aperture_windows`). Pairs whose window is
         empty are not here. ``None`` when the culling test is switched off.
     """
 
