@@ -188,7 +188,7 @@ def test_the_antennas_peak_amplitude_is_sampled_once_per_antenna_not_per_tile():
     """``tolerance_db`` bounds each candidate with the antennas' peak pattern amplitudes, a
     65,000-direction sampling of each pattern (about 10 ms). It was sampled twice per tile,
     which made the street canyon's R2+D1 map with ``tolerance_db=0.1`` slower than without it
-    (0.20 s against 0.16 s, now 0.14-0.15 s; docs/benchmarks.md). A map of eight tiles with two
+    (0.20 s against 0.16 s, now 0.14-0.15 s; docs/benchmarks-history.md, twenty-sixth session). A map of eight tiles with two
     different antennas now samples each once, and a second map none."""
     from wavepaths.coverage.tolerance import peak_pattern_amplitude
     from wavepaths.em.antennas import Antenna

@@ -118,8 +118,8 @@ TILE_IMAGE_BUDGET = 1 << 22  # receiver images held by one tile, for the automat
 LAUNCHED_TILE_MAX = 2048
 """Cells per tile at most with launched candidates: every tile scans all the fan segments
 traced for the map (munich: 6.26 M, about 0.75 s per tile), so tiles are large; a 2,048-cell
-munich square holds about 150,000 launched candidates (docs/benchmarks.md, seventeenth
-session), and since the twenty-seventh session about 700,000 more from the enumerated E-D-R
+munich square holds about 150,000 launched candidates (docs/benchmarks-history.md,
+seventeenth session), and since the twenty-seventh session about 700,000 more from the enumerated E-D-R
 paths (:mod:`wavepaths.search.launched`)."""
 
 
