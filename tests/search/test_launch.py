@@ -420,14 +420,13 @@ def test_a_first_order_diffraction_the_fans_missed_on_the_street_canyon_is_found
     assert _sorted_keys(launched) == _sorted_keys(exhaustive)
 
 
-@pytest.mark.xfail(strict=True, reason="launched candidates: a lit stretch shorter than the 0.25 m sample spacing, "
-                                       "between two hidden samples, starts no fan, and the chains with a "
-                                       "reflection are sampled (docs/search.md)")
 def test_a_diffraction_then_reflection_over_an_edge_seen_through_a_slit_starts_a_fan():
-    """The same edge with a wall beyond it: the D-R paths over the edge come from fans, and no
-    fan starts on its lit stretch (7 such paths here). The E-D-R paths are found (above).
-    Sampling each window at its cells' centres finds them, but lost a street-canyon path the
-    window's ends find (tests/coverage/test_coverage.py), so it was not kept."""
+    """The same edge with a wall beyond it: the D-R paths over the edge come from fans (7 such
+    paths here). They were missed until the twenty-eighth session: the visibility march
+    stopped at the wall's shadow, 2 mm beyond the slit's side face's (its float32 hint named
+    the wall at their corner; it now probes once more, deeper), and the window's end samples
+    stood on shadow boundaries, hidden by the occlusion rule (they now stand 1e-3 spacings
+    inside). Either change alone leaves all 7 missed."""
     from wavepaths.search import trace
 
     scene = _slit_scene(back_wall=True)

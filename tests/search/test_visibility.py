@@ -50,6 +50,33 @@ def test_window_is_the_part_of_the_edge_the_screen_leaves_in_view():
     assert list(np.array([v.open0[0], v.open1[0]])[np.argsort(ends_y)]) == [False, True]
 
 
+def test_an_edge_seen_through_a_slit_has_the_slits_window():
+    """A roof edge 30 m away seen through a 6 cm slit in a 20 cm thick wall: the lit stretch is
+    bounded by the slit's far side faces (|y| <= 0.03 x 30 / 10.2 = 0.0882 m), not by the
+    wall's front (0.09 m). The march's hint ray at the corner of the front and a side face
+    named the front, whose shadow ends there; a second, deeper probe names the side face and
+    the window closes to the lit stretch (it stopped 1.8 mm wider on each side before)."""
+    from ..conftest import boxes_scene
+
+    half = 0.03
+    scene = boxes_scene([((10, -20, 0), (10.2, -half, 30)), ((10, half, 0), (10.2, 20, 30)),
+                         ((30, -20, 0), (40, 20, 10))])
+    dh = scene.dihedra
+    mid = dh.origin + 0.5 * dh.length[:, None] * dh.direction
+    d = np.nonzero(np.isclose(mid[:, 0], 30) & np.isclose(mid[:, 2], 10) & np.isclose(dh.length, 40))[0]
+    assert len(d) == 1
+    v = visibility_windows(scene, np.array([[0.0, 0.0, 1.5]]), d)
+    y = np.sort(dh.origin[d[0], 1] + np.array([v.lo[0], v.hi[0]]) * dh.direction[d[0], 1])
+    lit = half * 30 / 10.2
+    assert y == pytest.approx([-lit, lit], abs=1e-6)
+    # and what lies inside is seen, just outside hidden (the window proves only the outside)
+    inside = dh.origin[d[0]] + (0.999 * lit * np.array([-1.0, 1.0]) - dh.origin[d[0], 1])[:, None] * dh.direction[d[0]]
+    outside = dh.origin[d[0]] + (1.001 * lit * np.array([-1.0, 1.0]) - dh.origin[d[0], 1])[:, None] * dh.direction[d[0]]
+    tx = np.repeat([[0.0, 0.0, 1.5]], 2, axis=0)
+    assert not scene.raycaster.occluded(tx, inside).any()
+    assert scene.raycaster.occluded(tx, outside).all()
+
+
 def test_an_edge_behind_a_wide_screen_is_hidden_ends_included():
     scene = _wall_and_block((-6.0, 6.0))
     d = _front_top_edge(scene)

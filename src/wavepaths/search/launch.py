@@ -14,11 +14,14 @@ instead, by sampling, in three steps:
    through its mirrors (:func:`~wavepaths.search.images.backtrace`: every reflection point
    inside its polygon) and its legs are cast; a sample is kept when it, or a neighbour on
    the same window, is lit. No transmitter rays are launched: the sources and windows are
-   the exact engine's, so no edge is missed for being seen at a grazing angle; a lit stretch
-   shorter than the spacing whose samples on either side are both hidden starts no fan (an
-   edge seen only through a slit narrower than the spacing: its D-R paths are missed,
-   ``tests/search/test_launch.py``, a strict expected failure; its E-D-R paths are enumerated). The spacing is absolute (0.25 m): on room-sized scenes the
-   exhaustive search, the default, is the one to use.
+   the exact engine's, so no edge is missed for being seen at a grazing angle. The end
+   samples stand ``END_INSET`` spacings inside the window: a window end is a shadow's
+   boundary, where the occlusion rule hides the point, and an edge seen only through a slit
+   has the slit's lit stretch as its window (``tests/search/test_launch.py``). A lit
+   stretch shorter than the spacing *inside* a window, between two hidden samples, still
+   starts no fan: the chains with a reflection over it are missed (its E-D-R paths are
+   enumerated). The spacing is absolute (0.25 m): on room-sized scenes the exhaustive
+   search, the default, is the one to use.
 2. **Keller fans** (:func:`fan_segments`, once for the box of the query points). From
    every kept sample, ``fan`` rays on the Keller cone of the incident direction (seed
    §2.1: ``v . w = u . w``), in the wedge's exterior, are traced through up to ``D - a``
@@ -208,6 +211,10 @@ def edge_samples(scene: "Scene", ctx: "TxContext", options: LaunchOptions = Laun
     return EdgeSamples(*(np.concatenate(c) for c in zip(*parts)))
 
 
+END_INSET = 1e-3
+"""How far inside its window an end sample stands, in sample spacings (at most a quarter of
+the window): 0.25 mm at the 0.25 m spacing, far above the occlusion rule's tolerances."""
+
 SAMPLE_PAIR_CHUNK = 1 << 18
 """(source, dihedron) pairs sampled at once (a few samples each: bounds the temporaries)."""
 
@@ -225,7 +232,11 @@ def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.nd
     row = np.repeat(np.arange(len(d)), count)
     j = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
     frac = np.where(count[row] > 1, j / np.maximum(count[row] - 1, 1), 0.5)
-    t = lo[row] + (hi - lo)[row] * frac
+    # the end samples stand just inside the window: an end the visibility march stopped at
+    # lies on a face's shadow boundary (within its margins), where the segment from the
+    # source grazes that face and the occlusion rule calls it hidden
+    inset = np.minimum(END_INSET * spacing, 0.25 * (hi - lo))
+    t = (lo + inset)[row] + (hi - lo - 2 * inset)[row] * frac
     x = D.origin[d[row]] + t[:, None] * D.direction[d[row]]
     chain = src.chain[pr][row]
     lit = np.zeros(len(row), dtype=bool)

@@ -298,14 +298,11 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
     moving = np.ones((2, len(d)), dtype=bool)  # left end, right end
     reach_l, reach_r = lo.copy(), hi.copy()  # nominal extent of the shadows that moved each end
     rays = rounds = 0
-    for rounds in range(1, max_rounds + 1):
-        moving &= (lo < hi)[None, :]
-        il, ir = np.nonzero(moving[0])[0], np.nonzero(moving[1])[0]
-        if len(il) + len(ir) == 0:
-            rounds -= 1
-            break
-        idx = np.concatenate([il, ir])
-        probe = np.concatenate([np.minimum(reach_l[il] + step, hi[il]), np.maximum(reach_r[ir] - step, lo[ir])])
+
+    def hint_intervals(idx: np.ndarray, probe: np.ndarray):
+        """The shadow intervals (proven, nominal) on the edges ``idx`` of the first face the
+        hint ray toward each probe meets (empty where it meets none that may prove one)."""
+        nonlocal rays
         E = A[idx] + probe[:, None] * w[idx]
         if through is None:
             tri = first(S[idx], E + c0)
@@ -323,17 +320,40 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
             h = np.nonzero(hit)[0]
             args = (exact, Sr[idx[h]], tri[h], A[idx[h]], w[idx[h]], L[idx[h]])
             s_lo[h], s_hi[h], n_lo[h], n_hi[h] = both_shadow_intervals(*args, compiled=use_kernel)
+        return s_lo, s_hi, n_lo, n_hi
+
+    def advance(il: np.ndarray, ir: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
+        """One step of the left ends ``il`` and the right ends ``ir``, probing ``depth`` inside
+        the extent of the shadows that moved them; (bool, bool) which moved."""
+        idx = np.concatenate([il, ir])
+        probe = np.concatenate([np.minimum(reach_l[il] + depth, hi[il]), np.maximum(reach_r[ir] - depth, lo[ir])])
+        s_lo, s_hi, n_lo, n_hi = hint_intervals(idx, probe)
         nl = len(il)
         # left end: the face's nominal shadow reaches back to it (within tau), its proven
         # shadow beyond the probe; the end moves to the far side of the proven shadow
         adv_l = (n_lo[:nl] <= reach_l[il] + tau) & (s_hi[:nl] >= probe[:nl])
         lo[il[adv_l]] = s_hi[:nl][adv_l]
         reach_l[il[adv_l]] = np.maximum(n_hi[:nl], s_hi[:nl])[adv_l]
-        moving[0, il[~adv_l]] = False
         adv_r = (n_hi[nl:] >= reach_r[ir] - tau) & (s_lo[nl:] <= probe[nl:])
         hi[ir[adv_r]] = s_lo[nl:][adv_r]
         reach_r[ir[adv_r]] = np.minimum(n_lo[nl:], s_lo[nl:])[adv_r]
-        moving[1, ir[~adv_r]] = False
+        return adv_l, adv_r
+
+    for rounds in range(1, max_rounds + 1):
+        moving &= (lo < hi)[None, :]
+        il, ir = np.nonzero(moving[0])[0], np.nonzero(moving[1])[0]
+        if len(il) + len(ir) == 0:
+            rounds -= 1
+            break
+        adv_l, adv_r = advance(il, ir, step)
+        # an end whose hint ray passed a corner of two faces within float32's reach may have
+        # been given the face whose shadow ends there: once more, deeper (a hint only; the
+        # same rule proves the shadow)
+        il2, ir2 = il[~adv_l], ir[~adv_r]
+        il2, ir2 = il2[lo[il2] < hi[il2]], ir2[lo[ir2] < hi[ir2]]
+        adv_l2, adv_r2 = advance(il2, ir2, RETRY_DEPTH * tau) if len(il2) + len(ir2) else (il2 > 0, ir2 > 0)
+        moving[0, il2[~adv_l2]] = False
+        moving[1, ir2[~adv_r2]] = False
     ends = np.concatenate([dihedra.origin[d], dihedra.origin[d] + L[:, None] * w])
     if through is None:
         open_ends = ~caster.occluded(np.concatenate([S, S]), ends)
@@ -354,6 +374,11 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
     rays += 2 * len(d)
     return VisibilityWindows(lo, hi, open_ends[: len(d)], open_ends[len(d):], tau, rays, rounds)
 
+
+RETRY_DEPTH = 1e3
+"""A march end whose first hint fails is probed once more this many ``tau`` inside (1e-6 of
+the scene diagonal): past a corner where the float32 hint names the face whose shadow ends
+there, not the next one (a slit's side face behind its wall, tests/search/test_visibility.py)."""
 
 MIRROR_STEP = 1e-4
 """Where an image source's hint ray starts: this fraction of the leg beyond the mirror's
