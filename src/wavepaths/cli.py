@@ -213,7 +213,9 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
                         "Sionna RT without edge_diffraction also skips edges whose other faces are other objects')")
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
-                   help="drop reflections at least this many dB below free space (bound in TraceOptions)")
+                   help="drop reflected paths whose length alone (|reflection coefficient| <= 1) puts them at "
+                        "least this many dB below free space at the direct distance; a path's actual "
+                        "coefficients are not looked at (bound in TraceOptions.prune_db)")
     p.add_argument("--diffraction-candidates", choices=["exhaustive", "launched"], default="exhaustive",
                    help="diffracted candidates: every one no test rules out (default; complete), or those that "
                         "sampled Keller fans carry to each receiver (dense cities; may miss a path)")
@@ -331,6 +333,14 @@ def _first_run_notice(args) -> None:
               file=sys.stderr)
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning on the command line: one plain line on standard error, without the Python
+    file and source line it was raised from (restored when :func:`main` returns)."""
+    name = getattr(category, "__name__", "Warning")
+    kind = "warning" if name in ("WavepathsWarning", "UserWarning") else name
+    print(f"wavepaths: {kind}: {message}", file=sys.stderr if file is None else file)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -339,6 +349,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _first_run_notice(args)
         with warnings.catch_warnings():
             warnings.simplefilter("default")
+            warnings.showwarning = _show_warning
             return int(args.func(args) or 0)
     except WavepathsError as exc:
         print(f"wavepaths {args.command}: error: {exc}", file=sys.stderr)

@@ -204,7 +204,7 @@ def _details(cmap: "CoverageMap", quantity: str, tx: int | None = None) -> list[
     else:
         i = 0 if tx is None else tx % cmap.num_tx
         which = "tx" if cmap.num_tx == 1 else f"tx {i} of {cmap.num_tx}"
-        parts.append(f"{which} at ({', '.join(f'{c:.4g}' for c in cmap.tx_positions[i])}) m")
+        parts.append(f"{which} at ({', '.join(f'{c:.10g}' for c in cmap.tx_positions[i])}) m")
     return [_minus(p) for p in parts]
 
 
