@@ -9,6 +9,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 
 from wavepaths import TraceOptions, load_scene, trace
 from wavepaths.search.paths import InteractionType
@@ -55,3 +56,33 @@ def test_a_reflection_on_a_buildings_corner_edge_with_both_legs_outside_is_kept(
     # the same query with the wall's reflection point 1 mm inside the face: the same paths
     q = trace(scene, np.array([[0.0, 3.0, 1.0]]), np.array([[0.0, 6.998, 1.0]]), TraceOptions(max_reflections=1))
     assert sorted(q.interactions[:, 0].tolist()) == sorted(p.interactions[:, 0].tolist())
+
+
+def test_the_compiled_chords_are_the_numpy_ones():
+    pytest.importorskip("numba")
+    from wavepaths.search._numba_chords import reflection_chords
+    from wavepaths.search.through_vertices import CHORD, HEIGHT, reflection_chords_numpy
+
+    scene = load_scene("street_canyon")
+    rx = np.array([[x, y, 1.5] for x in np.linspace(-80, 80, 9) for y in np.linspace(-8, 8, 5)])
+    p = _trace(scene, [-60, 0, 10], rx)
+    args = (np.ascontiguousarray(p.vertices), np.ascontiguousarray(p.interactions), np.ascontiguousarray(p.primitive),
+            scene.polygon_normal, CHORD * scene.diagonal, HEIGHT * scene.diagonal)
+    A, B, row = reflection_chords(*args)
+    A0, B0, row0 = reflection_chords_numpy(*args)
+    assert len(row) > 100 and np.array_equal(row, row0)
+    assert np.allclose(A, A0, rtol=0, atol=1e-12) and np.allclose(B, B0, rtol=0, atol=1e-12)
+
+
+def test_the_numpy_reference_drops_the_same_paths():
+    from wavepaths.search.through_vertices import crossed_at_reflections
+
+    scene = load_scene("street_canyon")
+    opts = TraceOptions(max_reflections=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = trace(scene, np.array([[-20.0, 17.0, 5.0]]), np.array([[-52.5, 3.5, 1.5], [-52.5, 3.5001, 1.5001]]),
+                  opts.with_(compiled=False))
+    assert p.stats["paths_dropped_through_a_face"] == 1
+    q = _trace(scene, [-60, 0, 10], [[x, 0.5, 1.5] for x in np.linspace(-80, 80, 17)])
+    assert np.array_equal(crossed_at_reflections(scene, q, compiled=False), crossed_at_reflections(scene, q))

@@ -255,11 +255,11 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     return pair[order], key[order], result.a[order] * phase, (np.abs(result.a) ** 2)[order], field
 
 
-def _through_no_face(scene: Scene, paths: Paths, stats: Counter) -> Paths:
+def _through_no_face(scene: Scene, paths: Paths, stats: Counter, compiled: bool) -> Paths:
     """``paths`` without those crossing a face's boundary at a reflection point
     (:func:`wavepaths.search.through_vertices.crossed_at_reflections`), counted in
     ``stats["paths_dropped_through_a_face"]`` (of the tile's last assembly)."""
-    crossed = crossed_at_reflections(scene, paths, stats)
+    crossed = crossed_at_reflections(scene, paths, stats, None if compiled else False)
     stats["paths_dropped_through_a_face"] = int(crossed.sum())
     return paths.select(~crossed) if crossed.any() else paths
 
@@ -275,7 +275,7 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
     paths = _through_no_face(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False),
-                                                   stats), stats)
+                                                   stats), stats, ctx.options.compiled)
     pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
@@ -285,7 +285,8 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
         paths = _through_no_face(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats),
-                                                                           sort=False), stats), stats)
+                                                                           sort=False), stats), stats,
+                                 ctx.options.compiled)
         pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at

@@ -43,7 +43,8 @@ HEIGHT = 1e-9
 """The least height of the chord above the mirror's plane, in scene diagonals."""
 
 
-def crossed_at_reflections(scene: "Scene", paths: "Paths", stats: Counter | None = None) -> np.ndarray:
+def crossed_at_reflections(scene: "Scene", paths: "Paths", stats: Counter | None = None,
+                           compiled: bool | None = None) -> np.ndarray:
     """(N,) bool: the paths whose legs at some reflection point lie on opposite sides of a face
     through it (see the module docstring), by one cast per reflection point.
 
@@ -53,34 +54,49 @@ def crossed_at_reflections(scene: "Scene", paths: "Paths", stats: Counter | None
     paths : Paths
     stats : Counter, optional
         ``rays_cast_reflection_chords`` is added to it.
+    compiled : bool, optional
+        The chords in :func:`wavepaths.search._numba_chords.reflection_chords` (default when
+        numba is installed); ``False``: :func:`reflection_chords_numpy`, its reference.
     """
-    n = len(paths)
-    out = np.zeros(n, dtype=bool)
-    if n == 0 or paths.max_depth == 0:
+    out = np.zeros(len(paths), dtype=bool)
+    if len(paths) == 0 or paths.max_depth == 0:
         return out
-    rows, j = np.nonzero(paths.interactions == InteractionType.REFLECTION)
-    if len(rows) == 0:
+    from . import kernels
+
+    args = (np.ascontiguousarray(paths.vertices, dtype=np.float64), np.ascontiguousarray(paths.interactions),
+            np.ascontiguousarray(paths.primitive, dtype=np.int64), scene.polygon_normal,
+            CHORD * scene.diagonal, HEIGHT * scene.diagonal)
+    if compiled is not False and kernels.available():
+        from ._numba_chords import reflection_chords
+
+        A, B, row = reflection_chords(*args)
+    else:
+        A, B, row = reflection_chords_numpy(*args)
+    if len(row) == 0:
         return out
-    V = paths.vertices
+    hit = scene.raycaster.occluded(A, B)
+    if stats is not None:
+        stats["rays_cast_reflection_chords"] += len(row)
+    out[row[hit]] = True
+    return out
+
+
+def reflection_chords_numpy(V: np.ndarray, kinds: np.ndarray, prim: np.ndarray, normal: np.ndarray, chord: float,
+                            height: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The chords of :func:`crossed_at_reflections`: ends ``A``, ``B`` (m, 3) [m] and the path
+    of each (m,), one per reflection point whose chord stands at least ``height`` [m] above its
+    mirror; ``V`` (N, D + 2, 3) the paths' vertices, ``kinds`` and ``prim`` (N, D) their
+    interactions and primitives, ``normal`` (p, 3) the polygons' unit normals, ``chord`` [m]
+    the distance from the reflection point along each leg (raised for grazing reflections)."""
+    rows, j = np.nonzero(kinds == InteractionType.REFLECTION)
     P, prev, nxt = V[rows, j + 1], V[rows, j], V[rows, j + 2]
     a, b = prev - P, nxt - P
-    la, lb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
+    la, lb = np.sqrt(np.einsum("ij,ij->i", a, a)), np.sqrt(np.einsum("ij,ij->i", b, b))
     ok = (la > 0) & (lb > 0)
     ua = a / np.where(ok, la, 1.0)[:, None]
     ub = b / np.where(ok, lb, 1.0)[:, None]
-    normal = scene.polygon_normal[paths.primitive[rows, j]]
-    cos_t = np.abs(np.einsum("ij,ij->i", ua, normal))
-    diag = scene.diagonal
-    delta = np.maximum(CHORD * diag, HEIGHT * diag / np.maximum(cos_t, 1e-300))
-    delta = np.minimum(delta, 0.25 * np.minimum(la, lb))
-    ok &= delta * cos_t >= HEIGHT * diag
+    cos_t = np.abs(np.einsum("ij,ij->i", ua, normal[prim[rows, j]]))
+    delta = np.minimum(np.maximum(chord, height / np.maximum(cos_t, 1e-300)), 0.25 * np.minimum(la, lb))
+    ok &= delta * cos_t >= height
     sel = np.nonzero(ok)[0]
-    if len(sel) == 0:
-        return out
-    A = P[sel] + delta[sel, None] * ua[sel]
-    B = P[sel] + delta[sel, None] * ub[sel]
-    hit = scene.raycaster.occluded(A, B)
-    if stats is not None:
-        stats["rays_cast_reflection_chords"] += len(sel)
-    out[rows[sel[hit]]] = True
-    return out
+    return P[sel] + delta[sel, None] * ua[sel], P[sel] + delta[sel, None] * ub[sel], rows[sel]

@@ -227,7 +227,8 @@ def trace(
         if progress is not None:
             progress(min(len(rx), s + size))
     paths = assemble(tx, rx, batches, dict(stats), merge_tol=scene.length_tolerance(scene.tolerances.weld))
-    crossed = crossed_at_reflections(scene, paths, stats)  # through a face's boundary at a reflection point
+    # through a face's boundary at a reflection point
+    crossed = crossed_at_reflections(scene, paths, stats, None if opts.compiled else False)
     if crossed.any():
         stats["paths_dropped_through_a_face"] = int(crossed.sum())
         paths = paths.select(~crossed)
