@@ -106,6 +106,11 @@ def _trace_options(args):
     )
 
 
+def plural(n: int, word: str) -> str:
+    """``n`` and ``word``, with an ``s`` unless ``n`` is 1: ``1 path``, ``3 paths``."""
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
 def _cmd_paths(args) -> int:
     from .search import trace
 
@@ -113,7 +118,8 @@ def _cmd_paths(args) -> int:
     tx = np.array(args.tx, dtype=float).reshape(-1, 3)
     rx = np.array(args.rx, dtype=float).reshape(-1, 3)
     field_cfg = _field_config(args)  # checked before the search
-    paths = trace(scene, tx, rx, _trace_options(args))
+    options = _trace_options(args)
+    paths = trace(scene, tx, rx, options)
     result = None
     if field_cfg is not None:
         from .fields import compute_fields
@@ -139,9 +145,10 @@ def _cmd_paths(args) -> int:
         out = {"scene": scene.source, "tx": tx.tolist(), "rx": rx.tolist(), "paths": records, "receivers": receivers}
         if result is not None:
             out["frequency_hz"] = result.frequency_hz
+        out.update(run_settings(options, field_cfg if result is not None else None))
         print(json_text(out))
         return 0
-    print(f"{len(records)} paths in {scene.source}")
+    print(f"{plural(len(records), 'path')} in {scene.source}")
     header = f"{'tx':>3} {'rx':>3}  {'interactions':<34} {'length [m]':>11} {'delay [ns]':>11}"
     if result is not None:
         header += f" {'gain [dB]':>10}"
@@ -154,17 +161,65 @@ def _cmd_paths(args) -> int:
             line += f" {r['gain_db']:>10.2f}"
         print(line)
     if result is not None:
-        for e in receivers:
-            if len(tx) == 1:
-                print(f"rx {e['rx']}: path gain {e['path_gain_db']:.2f} dB (coherent), "
-                      f"{e['path_gain_incoherent_db']:.2f} dB (power sum)")
-                continue
-            best = "none (no path arrives)" if e["best_server"] is None else f"tx {e['best_server']}"
-            print(f"rx {e['rx']}: best server {best}")
-            for t in e["per_tx"]:
-                print(f"  tx {t['tx']} -> rx {e['rx']}: {t['num_paths']} paths, path gain {t['path_gain_db']:.2f} dB "
-                      f"(coherent), {t['path_gain_incoherent_db']:.2f} dB (power sum)")
+        _print_receiver_totals(receivers, len(tx), power_given=getattr(args, "tx_power_dbm", None) is not None)
     return 0
+
+
+def run_settings(options, field_cfg) -> dict:
+    """The settings behind the numbers of ``paths --json``, named as ``coverage`` names them
+    in its ``.npz`` (``tx_power_dbm``; ``trace_options`` and ``field_config`` as in its
+    ``metadata``): the trace options, and with fields the transmit power [dBm] and the field
+    configuration (frequency, model, antennas with their orientations [rad]).
+
+    Parameters
+    ----------
+    options : TraceOptions
+        The options the search ran with.
+    field_cfg : FieldConfig or None
+        The field settings, or None when no fields were computed.
+
+    Returns
+    -------
+    dict
+        ``trace_options``, and with fields ``tx_power_dbm`` and ``field_config``.
+    """
+    import dataclasses
+
+    out: dict = {"trace_options": options.to_dict()}
+    if field_cfg is not None:
+        out["tx_power_dbm"] = field_cfg.tx_power_dbm
+        out["field_config"] = dataclasses.asdict(field_cfg)
+    return out
+
+
+def _gain_text(totals: dict) -> str:
+    """One receiver's path gain in words, coherent and power sum."""
+    return (f"path gain {totals['path_gain_db']:.2f} dB (coherent), "
+            f"{totals['path_gain_incoherent_db']:.2f} dB (power sum)")
+
+
+def _power_text(totals: dict) -> str:
+    """One receiver's received power [dBm] and the field strength [dBuV/m] an isotropic
+    receiver sees, both from the coherent sum."""
+    return (f"received power {totals['received_power_dbm']:.2f} dBm, field strength "
+            f"{totals['field_strength_dbuv_m']:.2f} dBuV/m (coherent; isotropic receiver)")
+
+
+def _print_receiver_totals(receivers: list[dict], num_tx: int, power_given: bool) -> None:
+    """The per-receiver lines of ``paths``' text output; with ``--tx-power-dbm`` given, each
+    gain line is followed by the received power and the field strength."""
+    for e in receivers:
+        if num_tx == 1:
+            print(f"rx {e['rx']}: {_gain_text(e)}")
+            if power_given:
+                print(f"      {_power_text(e)}")
+            continue
+        best = "none (no path arrives)" if e["best_server"] is None else f"tx {e['best_server']}"
+        print(f"rx {e['rx']}: best server {best}")
+        for t in e["per_tx"]:
+            print(f"  tx {t['tx']} -> rx {e['rx']}: {plural(t['num_paths'], 'path')}, {_gain_text(t)}")
+            if power_given:
+                print(f"      {_power_text(t)}")
 
 
 def _receiver_entries(paths, result, rx: np.ndarray, num_tx: int) -> list[dict]:
@@ -247,7 +302,9 @@ def _add_field_flags(p: argparse.ArgumentParser) -> None:
                        metavar=("YAW", "PITCH", "ROLL"),
                        help=f"{'transmit' if side == 'tx' else 'receive'} antenna orientation [deg] about z, y, x "
                             "(TR 38.901 7.1.3, as Sionna RT's; default 0 0 0: boresight along +x)")
-    p.add_argument("--tx-power-dbm", type=float, default=0.0, help="transmit power [dBm] (default 0)")
+    p.add_argument("--tx-power-dbm", type=float, default=None,
+                   help="transmit power [dBm] (default 0); when it is given, the text of `paths` also shows "
+                        "the received power [dBm] and the field strength [dBuV/m]")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -60,6 +60,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 
 def _grid(args, scene):
+    from ..search.trace import check_positions
     from .grid import MeshGrid, PlanarGrid
 
     if args.mesh:
@@ -67,14 +68,54 @@ def _grid(args, scene):
             raise WavepathsError("--mesh replaces the planar grid: leave out --height, --cell, --size and --center")
         if not os.path.exists(args.mesh):
             raise WavepathsError(f"{args.mesh}: no such measurement mesh")
-        return MeshGrid.from_file(args.mesh, up_axis=getattr(args, "up_axis", "auto"))  # turned as the scene is
+        grid = MeshGrid.from_file(args.mesh, up_axis=getattr(args, "up_axis", "auto"))  # turned as the scene is
+        check_positions(f"--mesh {args.mesh}: cell centres", grid.cell_centers(), allow_empty=True)
+        return grid
     missing = [f for f, v in (("--height", args.height), ("--cell", args.cell)) if v is None]
     if missing:
         raise WavepathsError(f"a planar grid needs {' and '.join(missing)} (or give --mesh FILE)")
     lo, hi = scene.bounds
     center = np.array(args.center if args.center else 0.5 * (lo[:2] + hi[:2]), dtype=float)
     size = np.array(args.size if args.size else hi[:2] - lo[:2], dtype=float)
+    check_grid_reach(args.height, center, size)
     return PlanarGrid(center=center, size=size, cell_size=args.cell, height=args.height)
+
+
+def check_grid_reach(height: float, center: np.ndarray, size: np.ndarray) -> None:
+    """Refuse a planar grid that reaches beyond the coordinates the search accepts.
+
+    ``paths`` refuses a receiver beyond :data:`~wavepaths.search.trace.MAX_COORDINATE`
+    metres (:func:`~wavepaths.search.trace.check_positions`); a grid's cells are receivers
+    too, and met no such check.
+
+    Parameters
+    ----------
+    height : float
+        ``--height`` [m].
+    center : (2,) array_like
+        ``--center`` [m] (or the scene's footprint centre).
+    size : (2,) array_like
+        ``--size`` [m] (or the scene's footprint).
+
+    Raises
+    ------
+    WavepathsError
+        A finite ``--height``, ``--center`` or grid edge beyond the limit (non-finite values
+        are left to :class:`~wavepaths.coverage.grid.PlanarGrid`, which names them).
+    """
+    from ..search.trace import MAX_COORDINATE
+
+    why = "(float64 cannot resolve wavelengths there)"
+    c = np.asarray(center, dtype=float)
+    half = 0.5 * np.abs(np.asarray(size, dtype=float))
+    for flag, values in (("--height", np.array([height], dtype=float)), ("--center", c)):
+        if np.isfinite(values).all() and (np.abs(values) > MAX_COORDINATE).any():
+            shown = " ".join(f"{v:g}" for v in values)
+            raise WavepathsError(f"{flag} {shown} is beyond {MAX_COORDINATE:g} m {why}")
+    reach = np.abs(c) + half
+    if np.isfinite(reach).all() and (reach > MAX_COORDINATE).any():
+        raise WavepathsError(f"--size {' '.join(f'{v:g}' for v in 2 * half)} around --center "
+                             f"{' '.join(f'{v:g}' for v in c)} reaches beyond {MAX_COORDINATE:g} m {why}")
 
 
 def _client(address: str):
@@ -92,7 +133,7 @@ def _client(address: str):
 
 
 def run(args) -> int:
-    from ..cli import _field_config, _scene, _trace_options, json_text
+    from ..cli import _field_config, _scene, _trace_options, json_text, plural
     from .plot import save_png
     from .solver import CoverageOptions, coverage
 
@@ -134,10 +175,10 @@ def run(args) -> int:
     if args.json:
         print(json_text(summary))
         return 0
-    print(f"coverage of {scene.source}: {cmap.num_cells} cells ({' x '.join(map(str, cmap.shape))}), "
+    print(f"coverage of {scene.source}: {plural(cmap.num_cells, 'cell')} ({' x '.join(map(str, cmap.shape))}), "
           f"{summary['cells_inside_objects']} inside objects, {summary['cells_without_paths']} without paths")
     if summary["cells_without_quantity"] != summary["cells_without_paths"]:
-        print(f"{args.quantity}: -inf dB on {summary['cells_without_quantity']} cells (no path of its kind)")
+        print(f"{args.quantity}: -inf dB on {plural(summary['cells_without_quantity'], 'cell')} (no path of its kind)")
     print(f"{cmap.elapsed_s:.2f} s ({cmap.cells_per_second:.0f} cells/s, {summary['ran_on']})")
     if finite.size:
         print(f"{args.quantity}: {summary['min']:.1f} .. {summary['max']:.1f}")

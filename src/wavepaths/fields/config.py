@@ -7,6 +7,7 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Literal
 
+import numpy as np
 from scipy.constants import speed_of_light
 
 from ..em.antennas import Antenna
@@ -15,6 +16,23 @@ from ..errors import WavepathsError
 DiffractionModel = Literal["utd", "gtd"]
 Compat = Literal["none", "sionna"]
 ReflectionModel = Literal["slab", "half_space"]
+
+
+def _check_antenna(name: str, value: object) -> None:
+    """Raise a :class:`WavepathsError` unless ``value`` is an :class:`Antenna`.
+
+    Parameters
+    ----------
+    name : str
+        The argument's name, for the message.
+    value : object
+        What was given.
+    """
+    if isinstance(value, Antenna):
+        return
+    hint = f"; write Antenna({value!r})" if isinstance(value, str) else ""
+    raise WavepathsError(f"`{name}` must be an Antenna (wavepaths.em.antennas.Antenna), got "
+                         f"{type(value).__name__} {value!r}{hint}")
 
 
 @dataclass(frozen=True)
@@ -38,6 +56,8 @@ class FieldConfig:
         Reflection off a material: ITU-R P.2040 single-layer slab of the material's
         thickness (as Sionna RT), or a half-space.
     tx_antenna, rx_antenna : Antenna
+        Transmit and receive antennas (:class:`~wavepaths.em.antennas.Antenna`; a pattern
+        name such as ``"dipole"`` is refused: write ``Antenna("dipole")``).
     tx_power_dbm : float
         Transmit power for received power and field strength [dBm]; finite (NaN or
         infinity raise :class:`~wavepaths.errors.WavepathsError`).
@@ -67,6 +87,10 @@ class FieldConfig:
             raise WavepathsError(f"`compat` must be one of ('none', 'sionna'), got {self.compat!r}")
         if self.reflection_model not in ("slab", "half_space"):
             raise WavepathsError(f"`reflection_model` must be one of ('slab', 'half_space'), got {self.reflection_model!r}")
+        for name in ("tx_antenna", "rx_antenna"):
+            _check_antenna(name, getattr(self, name))
+        if not isinstance(self.compiled, (bool, np.bool_)):
+            raise WavepathsError(f"`compiled` must be True or False, got {self.compiled!r}")
         if isinstance(self.tx_power_dbm, bool) or not isinstance(self.tx_power_dbm, numbers.Real) \
                 or not math.isfinite(self.tx_power_dbm):
             raise WavepathsError(f"`tx_power_dbm` must be a finite number [dBm], got {self.tx_power_dbm!r}")
@@ -101,5 +125,5 @@ class FieldConfig:
             compat=getattr(args, "compat", "none"),
             tx_antenna=antenna("tx"),
             rx_antenna=antenna("rx"),
-            tx_power_dbm=args.tx_power_dbm,
+            tx_power_dbm=0.0 if getattr(args, "tx_power_dbm", None) is None else args.tx_power_dbm,
         )

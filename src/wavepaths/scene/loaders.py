@@ -298,6 +298,9 @@ def load_scene(
                                  "installed, one of Sionna RT's scenes such as simple_street_canyon)")
             return load_scene(sionna, material=material if given else None, tolerances=tolerances,
                               up_axis=up_axis, materials=materials)
+        if os.path.isdir(source):
+            raise SceneError(f"{source}: is a directory, not a scene file (give an .xml file or one of "
+                             f"{', '.join(MESH_FORMATS)})")
         ext = os.path.splitext(source)[1].lower()
         if ext == ".xml":
             _refuse_y_up(axis, source)
@@ -307,4 +310,55 @@ def load_scene(
         else:
             raise SceneError(f"{source}: unknown format '{ext}' (expected .xml or one of {', '.join(MESH_FORMATS)})")
     v, t, o, m, names, mats = arrays
+    warn_transparent_materials(source, o, m, names, mats)
     return build_scene(v, t, o, m, names, mats, source=source, tolerances=tolerances)
+
+
+def is_transparent(material: Material) -> bool:
+    """Whether ``material`` is free space: relative permittivity 1 and conductivity 0 at
+    every frequency (ITU-R P.2040's ``vacuum``, a custom ``air``).
+
+    Parameters
+    ----------
+    material : Material
+
+    Returns
+    -------
+    bool
+    """
+    return material.kind in ("itu", "custom") and material.a == 1.0 and material.b == 0.0 and material.c == 0.0
+
+
+def warn_transparent_materials(source: str, triangle_object: np.ndarray, triangle_material: np.ndarray,
+                               object_names, materials) -> None:
+    """Warn about the objects whose faces are of a free-space material.
+
+    wavepaths models no transmission: such a face still blocks every ray that meets it, its
+    reflections have zero amplitude (and are listed), and its edges still diffract (the UTD
+    terms of the incident field do not depend on the material). The physics is left as it
+    is; the warning names the objects.
+
+    Parameters
+    ----------
+    source : str
+        The scene's name or file, for the message.
+    triangle_object, triangle_material : (t,) int arrays
+        Each triangle's object and material index.
+    object_names : sequence of str
+    materials : sequence of Material
+    """
+    clear = [i for i, mat in enumerate(materials) if is_transparent(mat)]
+    if not clear:
+        return
+    hit = np.isin(np.asarray(triangle_material), clear)
+    if not hit.any():
+        return
+    objs = [str(object_names[i]) for i in np.unique(np.asarray(triangle_object)[hit])]
+    mats = sorted({materials[i].name for i in clear})
+    shown = ", ".join(objs[:8]) + (f" and {len(objs) - 8} more" if len(objs) > 8 else "")
+    warnings.warn(
+        f"{source}: object(s) {shown} have a free-space material ({', '.join(mats)}: permittivity 1, "
+        "conductivity 0); wavepaths models no transmission, so their faces still block rays, reflect "
+        "nothing and diffract at their edges. Remove these objects, or give them another material",
+        WavepathsWarning, stacklevel=external_stacklevel(),
+    )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -44,6 +45,10 @@ CULLING_COUNTERS: dict[str, str] = {
     "mirror_visibility": r"(rx_)?images_order_1_culled_hidden",
 }
 """The ``Paths.stats`` keys (regular expressions) under which each culling test counts what it drops."""
+
+
+BOOLEAN_FIELDS = ("los", "diffraction", "lit_region", "skip_absorbers", "compiled", "free_edges")
+"""The :class:`TraceOptions` fields that take ``True`` or ``False`` (Python or numpy booleans)."""
 
 
 @dataclass(frozen=True)
@@ -172,6 +177,17 @@ class TraceOptions:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Integral):
                 raise WavepathsError(f"`{name}` must be an integer, got {value!r}")
+        for name in BOOLEAN_FIELDS:
+            value = getattr(self, name)
+            if not isinstance(value, (bool, np.bool_)):
+                raise WavepathsError(f"`{name}` must be True or False, got {type(value).__name__} {value!r}")
+        for name in ("prune_db", "prune_frequency_hz", "tolerance_db"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real)):
+                raise WavepathsError(f"`{name}` must be a number or None, got {type(value).__name__} {value!r}")
+        if isinstance(self.disable_culling, str):
+            raise WavepathsError(f"`disable_culling` must be a set of culling test names, got the string "
+                                 f"{self.disable_culling!r}; write {{{self.disable_culling!r}}}")
         object.__setattr__(self, "disable_culling", frozenset(self.disable_culling))
         unknown = self.disable_culling - set(CULLING_TESTS)
         if unknown:
@@ -223,3 +239,41 @@ class TraceOptions:
         if self.diffraction:
             d = max(d, 1 + self.diffraction_reflections)
         return d
+
+
+def check_trace_arguments(scene, options) -> TraceOptions:
+    """The options of :func:`wavepaths.trace`, after checking the types of its arguments.
+
+    A scene name or an options dict passed where objects are expected would otherwise fail
+    deep inside the search, with an ``AttributeError``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene argument; a name or a file is refused (load it with
+        :func:`wavepaths.load_scene`).
+    options : TraceOptions or None
+        The options argument; None gives the default options.
+
+    Returns
+    -------
+    TraceOptions
+        ``options``, or ``TraceOptions()`` for None.
+
+    Raises
+    ------
+    WavepathsError
+        ``scene`` is not a :class:`~wavepaths.scene.model.Scene`, or ``options`` is neither a
+        :class:`TraceOptions` nor None.
+    """
+    from ..scene.model import Scene
+
+    if not isinstance(scene, Scene):
+        hint = f"; load it first: wavepaths.load_scene({scene!r})" if isinstance(scene, (str, os.PathLike)) else ""
+        raise WavepathsError(f"`scene` must be a Scene, got {type(scene).__name__}{hint}")
+    if options is None:
+        return TraceOptions()
+    if not isinstance(options, TraceOptions):
+        hint = "; write TraceOptions(**options)" if isinstance(options, dict) else ""
+        raise WavepathsError(f"`options` must be a TraceOptions or None, got {type(options).__name__}{hint}")
+    return options

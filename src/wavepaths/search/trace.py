@@ -31,7 +31,7 @@ from .context import TxContext, build_tx_context
 from .launched import prepare_launched
 from .on_faces import legs_into_solids, points_on_faces, points_on_surfaces, solid_surface_cones
 from .through_vertices import crossed_at_reflections
-from .options import TraceOptions
+from .options import TraceOptions, check_trace_arguments
 from .paths import Paths, assemble
 from .tile import trace_tile
 
@@ -183,7 +183,7 @@ def trace(
     takes part in no reflection or diffraction on that face or edge (its direction
     relative to them is undefined); other paths are found as usual.
     """
-    opts = options or TraceOptions()
+    opts = check_trace_arguments(scene, options)
     if opts.tolerance_db is not None:
         raise WavepathsError("`tolerance_db` applies to coverage maps only (it needs the fields of the other paths); "
                              "use `prune_db` with `prune_frequency_hz` for a path query")
