@@ -205,3 +205,12 @@ def test_an_air_material_is_named_in_a_warning(tmp_path):
 def test_solid_materials_give_no_warning(tmp_path):
     load_scene(wall_obj(tmp_path / "brick.obj", "brick"))  # warnings are errors here
     load_scene("street_canyon")
+
+
+def test_the_coverage_api_refuses_cells_beyond_the_coordinate_limit():
+    from wavepaths.coverage import PlanarGrid, coverage
+
+    scene = load_scene("half_plane")
+    grid = PlanarGrid(center=[0.0, 0.0], height=1e12, size=[4.0, 4.0], cell_size=2.0)
+    with pytest.raises(WavepathsError, match="grid cell centres.*beyond"):
+        coverage(scene, [[-10.0, 5.0, -5.0]], grid)

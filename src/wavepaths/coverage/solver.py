@@ -399,7 +399,7 @@ def coverage(
             f"(`CoverageOptions.max_memory_bytes`); use larger cells or a smaller area, or split the area"
         )
     centres = grid.cell_centers()
-    flat = centres.reshape(-1, 3)
+    flat = check_positions("grid cell centres", centres.reshape(-1, 3))
     bad = ~np.isfinite(flat).all(axis=1)
     if bad.any():
         raise WavepathsError(f"the grid has NaN or infinite cell centres at cell(s) {np.nonzero(bad)[0][:10].tolist()}")
