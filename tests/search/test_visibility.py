@@ -55,7 +55,8 @@ def test_an_edge_seen_through_a_slit_has_the_slits_window():
     bounded by the slit's far side faces (|y| <= 0.03 x 30 / 10.2 = 0.0882 m), not by the
     wall's front (0.09 m). The march's hint ray at the corner of the front and a side face
     named the front, whose shadow ends there; a second, deeper probe names the side face and
-    the window closes to the lit stretch (it stopped 1.8 mm wider on each side before)."""
+    the window closes to the lit stretch (before, it stopped 1.8 mm wider on one side and
+    8.7 m on the other)."""
     from ..conftest import boxes_scene
 
     half = 0.03

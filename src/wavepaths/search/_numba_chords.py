@@ -43,10 +43,10 @@ def reflection_chords(V, kinds, prim, normal, chord, height):
             bz /= lb
             q = prim[i, j]
             cos_t = abs(ax * normal[q, 0] + ay * normal[q, 1] + az * normal[q, 2])
-            delta = max(chord, height / max(cos_t, 1e-300))
-            delta = min(delta, 0.25 * min(la, lb))
-            if not (delta * cos_t >= height):
+            cap = 0.25 * min(la, lb)
+            if not (cap * cos_t >= height):  # decided before dividing: no rounding skips a chord
                 continue
+            delta = min(max(chord, height / cos_t), cap)
             A[m, 0] = V[i, j + 1, 0] + delta * ax
             A[m, 1] = V[i, j + 1, 1] + delta * ay
             A[m, 2] = V[i, j + 1, 2] + delta * az

@@ -96,7 +96,8 @@ def reflection_chords_numpy(V: np.ndarray, kinds: np.ndarray, prim: np.ndarray, 
     ua = a / np.where(ok, la, 1.0)[:, None]
     ub = b / np.where(ok, lb, 1.0)[:, None]
     cos_t = np.abs(np.einsum("ij,ij->i", ua, normal[prim[rows, j]]))
-    delta = np.minimum(np.maximum(chord, height / np.maximum(cos_t, 1e-300)), 0.25 * np.minimum(la, lb))
-    ok &= delta * cos_t >= height
+    cap = 0.25 * np.minimum(la, lb)
+    ok &= cap * cos_t >= height  # decided before dividing: no rounding skips a chord
+    delta = np.minimum(np.maximum(chord, height / np.where(ok, cos_t, 1.0)), cap)
     sel = np.nonzero(ok)[0]
     return P[sel] + delta[sel, None] * ua[sel], P[sel] + delta[sel, None] * ub[sel], rows[sel]
