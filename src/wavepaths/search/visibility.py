@@ -351,7 +351,8 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         # same rule proves the shadow)
         il2, ir2 = il[~adv_l], ir[~adv_r]
         il2, ir2 = il2[lo[il2] < hi[il2]], ir2[lo[ir2] < hi[ir2]]
-        adv_l2, adv_r2 = advance(il2, ir2, RETRY_DEPTH * tau) if len(il2) + len(ir2) else (il2 > 0, ir2 > 0)
+        none = np.zeros(0, dtype=bool)
+        adv_l2, adv_r2 = advance(il2, ir2, RETRY_DEPTH * tau) if len(il2) + len(ir2) else (none, none)
         moving[0, il2[~adv_l2]] = False
         moving[1, ir2[~adv_r2]] = False
     ends = np.concatenate([dihedra.origin[d], dihedra.origin[d] + L[:, None] * w])
