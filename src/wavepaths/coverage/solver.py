@@ -41,7 +41,7 @@ from ..search.paths import InteractionType, Paths, assemble, coincident_paths, p
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
-from ..search.through_vertices import crossed_at_reflections
+from ..search.through_vertices import drop_crossed
 from ..search.trace import _warn_on_faces, check_positions, points_on_faces
 from .grid import Grid, MeshGrid, PlanarGrid
 from .inside import inside_solid_objects, solid_objects
@@ -255,15 +255,6 @@ def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int
     return pair[order], key[order], result.a[order] * phase, (np.abs(result.a) ** 2)[order], field
 
 
-def _through_no_face(scene: Scene, paths: Paths, stats: Counter, compiled: bool) -> Paths:
-    """``paths`` without those crossing a face's boundary at a reflection point
-    (:func:`wavepaths.search.through_vertices.crossed_at_reflections`), counted in
-    ``stats["paths_dropped_through_a_face"]`` (of the tile's last assembly)."""
-    crossed = crossed_at_reflections(scene, paths, stats, None if compiled else False)
-    stats["paths_dropped_through_a_face"] = int(crossed.sum())
-    return paths.select(~crossed) if crossed.any() else paths
-
-
 def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray) -> TileSums:
     """Trace one tile of cell centres ``rx`` (k, 3) [m] and sum their path coefficients.
 
@@ -274,8 +265,9 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     m, k = len(ctx.tx), len(rx)
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
-    paths = _through_no_face(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False),
-                                                   stats), stats, ctx.options.compiled)
+    compiled = None if ctx.options.compiled else False
+    paths = drop_crossed(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats),
+                         stats, compiled)
     pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
@@ -284,9 +276,8 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
         # the fields again, with every path: a diffraction term next to a shadow or reflection
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
-        paths = _through_no_face(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats),
-                                                                           sort=False), stats), stats,
-                                 ctx.options.compiled)
+        paths = drop_crossed(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False),
+                                                   stats), stats, compiled)
         pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at

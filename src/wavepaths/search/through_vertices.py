@@ -81,6 +81,14 @@ def crossed_at_reflections(scene: "Scene", paths: "Paths", stats: Counter | None
     return out
 
 
+def drop_crossed(scene: "Scene", paths: "Paths", stats: Counter, compiled: bool | None = None) -> "Paths":
+    """``paths`` without those :func:`crossed_at_reflections` finds, counted in
+    ``stats["paths_dropped_through_a_face"]`` (set, for this set of paths)."""
+    crossed = crossed_at_reflections(scene, paths, stats, compiled)
+    stats["paths_dropped_through_a_face"] = int(crossed.sum())
+    return paths.select(~crossed) if crossed.any() else paths
+
+
 def reflection_chords_numpy(V: np.ndarray, kinds: np.ndarray, prim: np.ndarray, normal: np.ndarray, chord: float,
                             height: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The chords of :func:`crossed_at_reflections`: ends ``A``, ``B`` (m, 3) [m] and the path

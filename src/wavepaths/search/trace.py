@@ -30,7 +30,7 @@ from . import kernels
 from .context import TxContext, build_tx_context
 from .launched import prepare_launched
 from .on_faces import legs_into_solids, points_on_faces, points_on_surfaces, solid_surface_cones
-from .through_vertices import crossed_at_reflections
+from .through_vertices import drop_crossed
 from .options import TraceOptions, check_trace_arguments
 from .paths import Paths, assemble
 from .tile import trace_tile
@@ -227,11 +227,7 @@ def trace(
         if progress is not None:
             progress(min(len(rx), s + size))
     paths = assemble(tx, rx, batches, dict(stats), merge_tol=scene.length_tolerance(scene.tolerances.weld))
-    # through a face's boundary at a reflection point
-    crossed = crossed_at_reflections(scene, paths, stats, None if opts.compiled else False)
-    if crossed.any():
-        stats["paths_dropped_through_a_face"] = int(crossed.sum())
-        paths = paths.select(~crossed)
+    paths = drop_crossed(scene, paths, stats, None if opts.compiled else False)  # through a face at a reflection
     paths.stats.update(stats)
     if (tx_face >= 0).any() or (rx_face >= 0).any():  # ends on faces: legs through a solid they lie on
         inward = legs_into_solids(paths, _cones_of(scene, tx, tx_face), _cones_of(scene, rx, rx_face))
