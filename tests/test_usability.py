@@ -1,4 +1,4 @@
-"""Usability fixes of session 28: what ``paths`` says about transmit power and its settings,
+"""Usability, from a user's review (twenty-eighth session): what ``paths`` says about transmit power and its settings,
 clear errors for misused API arguments, the coordinate limit on coverage grids, plurals and
 directories in messages, and a warning for free-space materials."""
 
