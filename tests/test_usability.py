@@ -67,6 +67,23 @@ def test_paths_json_default_tx_power_is_zero(capsys):
     assert code == 0 and d["tx_power_dbm"] == 0.0 and "trace_options" in d
 
 
+def test_coverage_json_records_the_settings_behind_its_numbers(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "coverage", "street_canyon", *TX, "--height", "1.25", "--cell", "16",
+                           "--max-reflections", "1", "--no-diffraction", "--tx-power-dbm", "20", "--incoherent",
+                           "--workers", "1", "--out", tmp_path, "--quiet", "--json")
+    assert code == 0
+    d = json.loads(out)
+    for key in ("scene", "shape", "cells", "min", "max", "png", "npz"):  # the fields of before stay
+        assert key in d
+    assert d["tx_power_dbm"] == 20.0 and d["field_config"]["tx_power_dbm"] == 20.0
+    assert TraceOptions(**d["trace_options"]) == TraceOptions(max_reflections=1, diffraction=False)
+    assert d["coverage_options"]["coherent"] is False and d["coverage_options"]["workers"] == 1
+    with np.load(d["npz"], allow_pickle=False) as saved:  # the same settings as the map's own file records
+        meta = json.loads(str(saved["metadata"]))
+    for key in ("trace_options", "field_config", "coverage_options"):
+        assert meta[key] == d[key]
+
+
 # ---- 2. misused API arguments -----------------------------------------------------------------
 def test_check_trace_arguments_refuses_a_scene_name():
     with pytest.raises(WavepathsError, match=r"`scene` must be a Scene, got str; load it first"):

@@ -171,6 +171,11 @@ def run(args) -> int:
         "max": float(finite.max()) if finite.size else None,
         "png": png,
         "npz": npz,
+        # the settings behind the numbers, as the .npz's metadata and ``paths --json`` name them
+        "tx_power_dbm": cmap.metadata["field_config"]["tx_power_dbm"],
+        "trace_options": cmap.metadata["trace_options"],
+        "field_config": cmap.metadata["field_config"],
+        "coverage_options": cmap.metadata["coverage_options"],
     }
     if args.json:
         print(json_text(summary))
