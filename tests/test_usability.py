@@ -90,6 +90,20 @@ def test_check_trace_arguments_refuses_a_scene_name():
         check_trace_arguments("street_canyon", None)
 
 
+def test_build_tx_context_checks_its_arguments_as_trace_does():
+    from wavepaths import build_tx_context
+
+    scene = load_scene("half_plane")
+    with pytest.raises(WavepathsError, match=r"`scene` must be a Scene, got str"):
+        build_tx_context("half_plane", [[0.0, 0.0, 1.0]], TraceOptions())
+    with pytest.raises(WavepathsError, match=r"`options` must be a TraceOptions or None, got dict"):
+        build_tx_context(scene, [[0.0, 0.0, 1.0]], {"max_reflections": 1})
+    with pytest.raises(WavepathsError, match=r"tx"):
+        build_tx_context(scene, [[0.0, float("nan"), 1.0]], TraceOptions())
+    ctx = build_tx_context(scene, [0.0, 0.0, 1.0], None)  # one position, default options
+    assert ctx.tx.shape == (1, 3)
+
+
 def test_check_trace_arguments_refuses_an_options_dict():
     scene = load_scene("half_plane")
     with pytest.raises(WavepathsError, match=r"`options` must be a TraceOptions or None, got dict"):

@@ -32,7 +32,7 @@ from ..topology.sectors import SectorTable, sector_of, sector_table
 from .apertures import Apertures, scene_apertures
 from .beams import LazyChainBeams, chains_meeting_edges, edge_tree
 from .images import ImageLevel, build_image_levels
-from .options import TraceOptions
+from .options import TraceOptions, check_trace_arguments
 from .aperture_windows import chain_aperture_windows
 from .visibility import VisibilityWindows, visibility_windows
 
@@ -187,9 +187,18 @@ def _windows_in_blocks(scene: "Scene", lv: ImageLevel, c: np.ndarray, d: np.ndar
     return VisibilityWindows(*cat, parts[0].tau, sum(p.rays for p in parts), max(p.rounds for p in parts))
 
 
-def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions) -> TxContext:
-    """Build the :class:`TxContext` of transmitters ``tx`` (m, 3) for ``options``."""
-    tx = np.asarray(tx, dtype=np.float64).reshape(-1, 3)
+def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions | None) -> TxContext:
+    """Build the :class:`TxContext` of transmitters ``tx`` (m, 3) [m] for ``options``.
+
+    Raises a :class:`~wavepaths.errors.WavepathsError` for a ``scene`` that is not a Scene,
+    ``options`` that are not a :class:`TraceOptions`, or positions that are not finite
+    (k, 3) coordinates (:func:`~wavepaths.search.options.check_trace_arguments`,
+    :func:`~wavepaths.search.trace.check_positions`), as :func:`~wavepaths.search.trace.trace` does.
+    """
+    from .trace import check_positions
+
+    options = check_trace_arguments(scene, options)
+    tx = check_positions("tx", tx)
     max_order = options.max_reflections
     if options.diffraction:
         max_order = max(max_order, options.diffraction_reflections)
