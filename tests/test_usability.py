@@ -227,6 +227,26 @@ def test_a_vacuum_object_is_named_in_a_warning(tmp_path):
     assert len(paths) == 0
 
 
+def test_a_vacuum_face_reflects_nothing_and_is_not_traced(tmp_path):
+    from wavepaths.fields import FieldConfig, compute_fields
+
+    path = wall_obj(tmp_path / "vacuum.obj", "vacuum")
+    with pytest.warns(WavepathsWarning, match="free-space material"):
+        scene = load_scene(path)
+    tx, rx = [[-5.0, -2.0, 5.0]], [[-5.0, 2.0, 5.0]]  # both in front of the wall (x = 0), above the ground
+    opts = TraceOptions(max_reflections=1, diffraction=False)
+    # the default skips the wall as it skips absorbers: line of sight and the ground's reflection remain
+    paths = trace(scene, tx, rx, opts)
+    assert len(paths) == 2 and sorted(paths.depth.tolist()) == [0, 1]
+    # traced anyway, the wall's reflection is there, with a zero coefficient (permittivity 1)
+    every = trace(scene, tx, rx, opts.with_(skip_absorbers=False))
+    assert len(every) == 3
+    wall = (every.depth == 1) & (np.abs(every.vertices[:, 1, 0]) < 1e-9)
+    assert wall.sum() == 1
+    a = compute_fields(scene, every.select(wall), FieldConfig(3.5e9)).a
+    assert np.all(np.abs(a) == 0.0)
+
+
 def test_an_air_material_is_named_in_a_warning(tmp_path):
     path = wall_obj(tmp_path / "air.obj", "air")
     with pytest.warns(WavepathsWarning, match=r"wall have a free-space material \(air"):

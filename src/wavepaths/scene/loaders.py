@@ -333,8 +333,9 @@ def warn_transparent_materials(source: str, triangle_object: np.ndarray, triangl
                                object_names, materials) -> None:
     """Warn about the objects whose faces are of a free-space material.
 
-    wavepaths models no transmission: such a face still blocks every ray that meets it, its
-    reflections have zero amplitude (and are listed), and its edges still diffract (the UTD
+    wavepaths models no transmission: such a face still blocks every ray that meets it, it
+    reflects nothing (its reflection coefficient is 0: no reflection is traced off it while
+    ``TraceOptions.skip_absorbers`` is on, the default), and its edges still diffract (the UTD
     terms of the incident field do not depend on the material). The physics is left as it
     is; the warning names the objects.
 

@@ -4,7 +4,7 @@ The tree depends only on the source (a transmitter, or a receiver for reflection
 after a diffraction), so it is built once and reused for every receiver. Pruning keeps
 it complete (no valid path is lost) while dropping sequences that cannot carry a path:
 
-* a polygon whose material is an absorber never reflects (``skip_absorbers``);
+* a polygon whose material is an absorber or free space never reflects (``skip_absorbers``);
 * no reflection on the polygon just reflected on, nor on one coplanar with it;
 * the parent image must not lie in the new mirror's plane;
 * after reflecting on ``p``, the wave travels on the side of ``p`` where the previous
@@ -90,11 +90,16 @@ def polygon_spheres(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
 
 
 def reflecting_polygons(scene: "Scene", skip_absorbers: bool) -> np.ndarray:
-    """(p,) bool: polygons that may reflect (not absorbers when skipped, not hidden contact faces)."""
+    """(p,) bool: polygons that may reflect: not hidden contact faces, and with ``skip_absorbers``
+    not absorbers nor faces of a free-space material (:func:`~wavepaths.scene.loaders.is_transparent`:
+    permittivity 1 and conductivity 0, whose reflection coefficient is 0 at every angle, and
+    which still block rays since no transmission is modelled)."""
+    from ..scene.loaders import is_transparent
+
     keep = ~scene.hidden_polygons
     if skip_absorbers:
-        absorber = np.array([m.kind == "absorber" for m in scene.materials], dtype=bool)
-        keep &= ~absorber[scene.polygon_material]
+        silent = np.array([m.kind == "absorber" or is_transparent(m) for m in scene.materials], dtype=bool)
+        keep &= ~silent[scene.polygon_material]
     return keep
 
 

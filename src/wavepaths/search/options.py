@@ -73,7 +73,8 @@ class TraceOptions:
         the incident shadow boundary, ``|phi - phi'| < pi``). UTD needs them for a
         continuous total field; ``False`` keeps only the shadow region.
     skip_absorbers : bool
-        Never reflect off polygons whose material is an absorber.
+        Never reflect off polygons whose material is an absorber or free space (permittivity 1,
+        conductivity 0): their reflections have zero amplitude.
     rx_batch : int
         Receivers processed per vectorised tile (memory vs. overhead).
     prune_db : float or None
