@@ -332,6 +332,36 @@ def test_tolerance_db_changes_no_cells_power_sum_by_more_than_the_tolerance(cany
         np.testing.assert_array_equal(cut.num_paths[2][:, ok][~go], full.num_paths[2][:, ok][~go])
 
 
+def test_tolerance_db_checks_each_path_for_crossed_faces_once(canyon):
+    """With tolerance_db the geometrical-optics paths are checked for faces crossed at a
+    reflection once, not again with the diffracted paths: E-D-R paths have no reflection, so the
+    map casts exactly the chords of the map without diffraction (twice as many before)."""
+    tx, grid = [[-60, 0, 10], [-20, 4, 6]], canyon_grid()
+    go = coverage(canyon, tx, grid, TraceOptions(diffraction=False), settings=IN_PROCESS)
+    cut = coverage(canyon, tx, grid, TraceOptions(diffraction_reflections=0, tolerance_db=0.5), settings=IN_PROCESS)
+    assert np.nansum(cut.num_paths[2]) > 0 and go.stats["rays_cast_reflection_chords"] > 0
+    assert cut.stats["rays_cast_reflection_chords"] == go.stats["rays_cast_reflection_chords"]
+    np.testing.assert_array_equal(cut.num_paths[:2], go.num_paths[:2])
+
+
+def test_concatenate_keeps_every_path_padded_to_the_deeper(canyon):
+    from wavepaths.search.paths import concatenate
+
+    found = trace(canyon, [[-60, 0, 10]], [[0, 0, 1.5], [20, 5, 1.5]], TraceOptions(max_reflections=2))
+    shallow = found.depth <= 1
+    both = concatenate(found.select(shallow), found.select(~shallow))
+    order = np.concatenate([np.flatnonzero(shallow), np.flatnonzero(~shallow)])
+    assert len(both) == len(found) and both.interactions.shape == found.interactions.shape
+    for name in ("tx_index", "rx_index", "depth", "interactions", "primitive", "triangle", "wedge_faces", "vertices"):
+        np.testing.assert_array_equal(getattr(both, name), getattr(found, name)[order], err_msg=name)
+    # the shallow part alone is narrower: padded as assemble pads it
+    part = found.select(shallow)
+    narrow = type(part)(part.tx_positions, part.rx_positions, part.tx_index, part.rx_index, part.depth,
+                        part.interactions[:, :1], part.primitive[:, :1], part.triangle[:, :1], part.wedge_faces,
+                        part.vertices[:, :3])
+    np.testing.assert_array_equal(concatenate(narrow, found.select(~shallow)).vertices, found.vertices[order])
+
+
 def test_tolerance_db_is_refused_by_trace_and_with_gtd(canyon):
     with pytest.raises(WavepathsError, match="coverage maps only"):
         trace(canyon, [[-60, 0, 10]], [[0, 0, 1.5]], TraceOptions(tolerance_db=0.5))

@@ -37,7 +37,7 @@ from ..fields import FieldConfig, compute_fields
 from ..scene.model import Scene
 from ..search.context import TxContext, build_tx_context
 from ..search.options import TraceOptions
-from ..search.paths import InteractionType, Paths, assemble, coincident_paths, path_order
+from ..search.paths import InteractionType, Paths, assemble, coincident_paths, concatenate, path_order
 from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
@@ -266,18 +266,28 @@ def solve_tile(scene: Scene, ctx: TxContext, config: FieldConfig, rx: np.ndarray
     pending = [] if ctx.options.tolerance_db is not None else None
     batches, stats = trace_tile(scene, ctx, rx, 0, pending)
     compiled = None if ctx.options.compiled else False
-    paths = drop_crossed(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False), stats),
-                         stats, compiled)
+
+    def kept(found: list) -> Paths:
+        # the paths of batches ``found``, without those entering a solid from a transmitter on its
+        # surface or crossing a face at a reflection point
+        return drop_crossed(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, found, dict(stats), sort=False),
+                                                  stats), stats, compiled)
+
+    paths = kept(batches)
     pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     if pending:
         go_power = np.bincount(pair, power, m * k)
         keeps = tolerance_keep(ctx, config, pending, go_power, k, stats)
-        batches += [finish_diffraction(scene, ctx, p, 0, stats, keep) for p, keep in zip(pending, keeps)]
+        dropped = {name: stats.get(name, 0) for name in ("paths_dropped_into_solid", "paths_dropped_through_a_face")}
+        # the diffracted paths kept are checked alone (the others were above, once), then added
+        more = kept([finish_diffraction(scene, ctx, p, 0, stats, keep) for p, keep in zip(pending, keeps)])
+        for name, count in dropped.items():  # (set by the checks for the paths they see)
+            if name in stats:
+                stats[name] += count
         # the fields again, with every path: a diffraction term next to a shadow or reflection
         # boundary takes the side its geometrical-optics path is on (fields.chain), so the
         # diffracted paths' fields need the others beside them
-        paths = drop_crossed(scene, outside_solids(scene, ctx, assemble(ctx.tx, rx, batches, dict(stats), sort=False),
-                                                   stats), stats, compiled)
+        paths = concatenate(paths, more)
         pair, key, ap, power, field = _fields_sums(scene, config, paths, m, k)
     n3 = 3 * m * k
     # bincount adds in path order, like FieldResult.path_gain's np.add.at

@@ -335,6 +335,31 @@ def coincident_paths(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarr
     return drop
 
 
+def concatenate(first: Paths, second: Paths) -> Paths:
+    """The paths of ``first`` then those of ``second`` (found for the same transmitters and
+    receivers), padded to the deeper of the two as :func:`assemble` pads: ``NONE`` interactions,
+    primitives and triangles -1, the receiver repeated in ``vertices``. Unsorted; the stats
+    are ``first``'s."""
+    dmax = max(first.interactions.shape[1], second.interactions.shape[1])
+
+    def pad(a: np.ndarray, fill) -> np.ndarray:
+        extra = dmax - a.shape[1]
+        return a if extra == 0 else np.concatenate([a, np.full((len(a), extra), fill, dtype=a.dtype)], axis=1)
+
+    def pad_vertices(v: np.ndarray) -> np.ndarray:
+        extra = dmax + 2 - v.shape[1]
+        return v if extra == 0 else np.concatenate([v, np.repeat(v[:, -1:], extra, axis=1)], axis=1)
+
+    return Paths(first.tx_positions, first.rx_positions,
+                 np.concatenate([first.tx_index, second.tx_index]), np.concatenate([first.rx_index, second.rx_index]),
+                 np.concatenate([first.depth, second.depth]),
+                 np.concatenate([pad(first.interactions, 0), pad(second.interactions, 0)]).astype(np.int8),
+                 np.concatenate([pad(first.primitive, -1), pad(second.primitive, -1)]),
+                 np.concatenate([pad(first.triangle, -1), pad(second.triangle, -1)]),
+                 np.concatenate([first.wedge_faces, second.wedge_faces]),
+                 np.concatenate([pad_vertices(first.vertices), pad_vertices(second.vertices)]), dict(first.stats))
+
+
 def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True,
              merge_tol: float | None = None) -> Paths:
     """Concatenate path batches of different depths into one padded :class:`Paths`.
