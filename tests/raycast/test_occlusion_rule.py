@@ -98,6 +98,34 @@ def test_a_segment_over_a_roof_in_its_plane_grazes_the_walls_top_edge():
     assert not both_casters(s, [[-2.0, -2.0, 6.0]], [[2.0, 2.0, 6.0]]).any()
 
 
+@pytest.mark.parametrize("neighbour, cases", [
+    # B as tall as A: every leg in the shared plane x = 0 between them is inside
+    (((0, -5, 0), (10, 5, 15)), [((-20, 1.5), (20, 1.5), True), ((-20, 2.0), (20, 14.0), True)]),
+    # B lower (12 m): above it the shared plane has air on B's side, a leg there runs along A's face
+    (((0, -5, 0), (10, 5, 12)), [((-20, 1.5), (20, 1.5), True), ((-20, 13.0), (20, 14.0), False),
+                                 ((-20, 2.0), (20, 14.0), True)]),
+    # B shifted sideways (y 2..12): the leg runs along A's face in air up to y = 2, then between
+    (((0, 2, 0), (10, 12, 15)), [((-20, 1.5), (20, 1.5), True), ((-20, 1.5), (1.0, 1.5), False)]),
+], ids=["same_height", "lower", "shifted"])
+@pytest.mark.parametrize("shift", [0.0, 1e6], ids=["here", "at_1e6_m"])
+def test_a_leg_in_the_plane_of_two_buildings_shared_wall_is_blocked(neighbour, cases, shift):
+    """Two closed boxes touching along x = 0 (each with its own face there, as extruded city
+    footprints are): A x -10..0, y -5..5, z 0..15. A leg lying in the plane x = 0 enters the
+    plane's strip between them at a wall's edge, where the graze rule lets a leg that runs
+    along a face pass; with solid on both sides it runs inside the two buildings and is
+    blocked (a review found the line of sight and ground reflections through 20 m of
+    building). Along a part of A's face with air beside it, it still grazes freely."""
+    s = boxes_scene([((-10, -5, 0), (0, 5, 15)), neighbour], ground=50)
+    if shift:
+        s = transformed(s, translation=[shift, -shift, 0.0])
+    for (ya, za), (yb, zb), blocked in cases:
+        a = np.array([[shift, ya - shift, za]])
+        b = np.array([[shift, yb - shift, zb]])
+        assert both_casters(s, a, b).tolist() == [blocked], ((ya, za), (yb, zb))
+        assert both_casters(s, a - [1e-3, 0, 0], b - [1e-3, 0, 0]).all()  # 1 mm into A
+        assert not both_casters(s, a, a + [0, -1.0, 0]).any()  # outside both, in the plane
+
+
 @pytest.mark.parametrize("alpha", [1e-3, 1e-4])
 def test_the_face_next_to_an_end_point_still_blocks(alpha):
     """A thin wedge: A is the plane y = 0 (z < 0), B leaves the common edge at the interior

@@ -138,3 +138,18 @@ def test_the_numpy_reference_drops_the_same_paths(monkeypatch):
         numpy_drop = crossed_at_reflections(scene, paths, compiled=False)
         assert numpy_drop.any()
         assert np.array_equal(numpy_drop, crossed_at_reflections(scene, paths))
+
+
+@pytest.mark.parametrize("off", [0.0, 1e-3], ids=["in_the_plane", "1_mm_off"])
+def test_no_path_runs_in_the_plane_of_two_buildings_shared_wall(off):
+    """A review (twenty-ninth session): two closed buildings touching along x = 0, the ends in
+    that plane on either side of the block. The line of sight, the ground reflection under
+    the block and diffractions with legs through it were listed; in the plane the paths must
+    be those found 1 mm off it: the ground border's two diffractions around the block."""
+    from ..conftest import boxes_scene
+
+    scene = boxes_scene([((-10, -5, 0), (0, 5, 15)), ((0, -5, 0), (10, 5, 12))], ground=50)
+    p = _trace(scene, [off, -20.0, 1.5], [[off, 20.0, 1.5]])
+    assert len(p) == 2 and (p.depth == 1).all()
+    assert (p.interactions[:, 0] == InteractionType.DIFFRACTION).all()
+    np.testing.assert_allclose(np.sort(p.vertices[:, 1, 0]), [-50.0, 50.0], atol=1e-9)  # the ground's x = -+50 edges

@@ -52,7 +52,10 @@ class ExactSegments:
     3. A crossing next to an edge (within the plane tolerance) that lies on the closure of
        a triangle whose plane contains the segment, around that edge's corners, is a graze
        along that face's boundary (a segment running over a roof, in its plane, that
-       touches the top edge or a top corner of a wall below it), not a crossing.
+       touches the top edge or a top corner of a wall below it), not a crossing; unless the
+       segment runs there between two solids (:meth:`_between_solids`): in the plane of the
+       shared wall of two touching buildings, it enters at a wall's edge with solid on both
+       sides of that plane, and is blocked.
 
     The sums are written out in one order, ``(x0 y0 + x1 y1) + x2 y2``, the compiled
     kernels' (:mod:`wavepaths.raycast._numba`): for a segment nearly parallel to the plane
@@ -84,6 +87,9 @@ class ExactSegments:
         self.box_hi = self.hi + self.edge_tol
         # triangles around each vertex (CSR), for grazes along a coplanar face's boundary
         self.triangles = scene.triangles
+        self._scene = scene  # the solids, for grazes between two of them (built on first use)
+        self._solids = None
+        self.contact_step = 4.0 * scene.length_tolerance(scene.tolerances.plane_distance)
         flat = scene.triangles.ravel()
         self.vertex_tris = np.argsort(flat, kind="stable") // 3
         self.vertex_ptr = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=len(scene.vertices)))])
@@ -139,6 +145,7 @@ class ExactSegments:
         start = self.vertex_ptr[corner]
         count = self.vertex_ptr[corner + 1] - start
         out = np.zeros(len(t), dtype=bool)
+        plane = np.zeros(len(t), dtype=np.int64)  # a triangle whose plane holds the graze
         ends = np.cumsum(count)
         lo = 0
         while lo < len(r):  # chunks of whole corners, at least one, about `budget` pairs each
@@ -151,8 +158,53 @@ class ExactSegments:
             rr, other = rr[keep], other[keep]
             graze = self.in_plane(a[rr], other) & self.in_plane(b[rr], other)
             rr, other = rr[graze], other[graze]
-            out[rr[self._inside(x[rr], other)]] = True
+            on = self._inside(x[rr], other)
+            out[rr[on]] = True
+            plane[rr[on]] = other[on]
             lo = hi
+        rows = np.nonzero(out)[0]
+        if len(rows):
+            out[rows] = ~self._between_solids(a[rows], b[rows], x[rows], plane[rows], t[rows])
+        return out
+
+    def _between_solids(self, a: np.ndarray, b: np.ndarray, x: np.ndarray, other: np.ndarray,
+                        crossed: np.ndarray) -> np.ndarray:
+        """(k,) bool: the segment ``a -> b`` (recentred), lying in the plane of triangle
+        ``other`` and crossing the edge of triangle ``crossed`` at ``x``, has solid on both
+        sides of that plane on one side of the crossing: it runs inside the union of two
+        solids that touch there (a party wall: each building's own face in the plane), not
+        along a face with air beside it.
+
+        Tested at the points ``x + s u +- h n`` and ``x - s u +- h n`` (``u`` the segment's
+        direction, ``n`` the plane's normal, ``h`` :attr:`contact_step`, four plane
+        tolerances, and ``s`` as much or more, so that the points stand off the crossed
+        face's plane too, at most half the segment left on that side) with wavepaths' one
+        inside rule (:func:`wavepaths.coverage.inside.inside_solid_objects`, float64 ray
+        parity). Only the few crossings the graze rule would let pass come here.
+        """
+        from ..coverage.inside import inside_solid_objects, solid_objects
+
+        if self._solids is None:
+            self._solids = solid_objects(self._scene)
+        k = len(a)
+        if len(self._solids) == 0 or k == 0:
+            return np.zeros(k, dtype=bool)
+        d = b - a
+        length = np.sqrt(dot3(d, d))
+        u = d / np.where(length > 0, length, 1.0)[:, None]
+        h = self.contact_step
+        n = self.normal[other]
+        across = np.abs(dot3(u, self.normal[crossed]))  # off the crossed face's plane by at least h
+        step = h / np.maximum(across, 1e-3)
+        out = np.zeros(k, dtype=bool)
+        for end, sign in ((b, 1.0), (a, -1.0)):
+            left = np.sqrt(dot3(end - x, end - x))
+            s = np.minimum(np.maximum(step, h), 0.5 * left)
+            ok = s > 0
+            p = x + (sign * s)[:, None] * u
+            pts = np.concatenate([p + h * n, p - h * n]) + self.center
+            inside = inside_solid_objects(self._scene, pts, self._solids)
+            out |= ok & inside[:k] & inside[k:]
         return out
 
     # ---- against the whole scene ---------------------------------------------------------
