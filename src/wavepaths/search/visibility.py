@@ -301,8 +301,7 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
 
     def hint_intervals(idx: np.ndarray, probe: np.ndarray):
         """The shadow intervals (proven, nominal) on the edges ``idx`` of the first face the
-        hint ray toward each probe meets (empty where it meets none that may prove one), and
-        (k,) bool whether the hint ray met a face at all."""
+        hint ray toward each probe meets (empty where it meets none that may prove one)."""
         nonlocal rays
         E = A[idx] + probe[:, None] * w[idx]
         if through is None:
@@ -312,7 +311,6 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
             tri = first(X + MIRROR_STEP * (E - X) + c0, E + c0)
         rays += len(idx)
         hit = tri >= 0
-        met = hit.copy()
         s_lo, s_hi = np.full(len(idx), np.inf), np.full(len(idx), -np.inf)
         n_lo, n_hi = s_lo.copy(), s_hi.copy()
         if through is not None and hit.any():
@@ -322,15 +320,14 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
             h = np.nonzero(hit)[0]
             args = (exact, Sr[idx[h]], tri[h], A[idx[h]], w[idx[h]], L[idx[h]])
             s_lo[h], s_hi[h], n_lo[h], n_hi[h] = both_shadow_intervals(*args, compiled=use_kernel)
-        return s_lo, s_hi, n_lo, n_hi, met
+        return s_lo, s_hi, n_lo, n_hi
 
     def advance(il: np.ndarray, ir: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
         """One step of the left ends ``il`` and the right ends ``ir``, probing ``depth`` inside
-        the extent of the shadows that moved them; (bool, bool) which moved, and (bool, bool)
-        whose hint ray met a face."""
+        the extent of the shadows that moved them; (bool, bool) which moved."""
         idx = np.concatenate([il, ir])
         probe = np.concatenate([np.minimum(reach_l[il] + depth, hi[il]), np.maximum(reach_r[ir] - depth, lo[ir])])
-        s_lo, s_hi, n_lo, n_hi, met = hint_intervals(idx, probe)
+        s_lo, s_hi, n_lo, n_hi = hint_intervals(idx, probe)
         nl = len(il)
         # left end: the face's nominal shadow reaches back to it (within tau), its proven
         # shadow beyond the probe; the end moves to the far side of the proven shadow
@@ -340,7 +337,7 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         adv_r = (n_hi[nl:] >= reach_r[ir] - tau) & (s_lo[nl:] <= probe[nl:])
         hi[ir[adv_r]] = s_lo[nl:][adv_r]
         reach_r[ir[adv_r]] = np.minimum(n_lo[nl:], s_lo[nl:])[adv_r]
-        return adv_l, adv_r, met[:nl], met[nl:]
+        return adv_l, adv_r
 
     for rounds in range(1, max_rounds + 1):
         moving &= (lo < hi)[None, :]
@@ -348,18 +345,16 @@ def visibility_windows(scene: "Scene", S: np.ndarray, d: np.ndarray, max_rounds:
         if len(il) + len(ir) == 0:
             rounds -= 1
             break
-        adv_l, adv_r, met_l, met_r = advance(il, ir, step)
+        adv_l, adv_r = advance(il, ir, step)
         # an end whose hint ray passed a corner of two faces within float32's reach may have
         # been given the face whose shadow ends there: once more, deeper (a hint only; the
-        # same rule proves the shadow). An end whose hint ray met no face is lit: it stops
-        il2, ir2 = il[~adv_l & met_l], ir[~adv_r & met_r]
+        # same rule proves the shadow)
+        il2, ir2 = il[~adv_l], ir[~adv_r]
         il2, ir2 = il2[lo[il2] < hi[il2]], ir2[lo[ir2] < hi[ir2]]
         none = np.zeros(0, dtype=bool)
-        adv_l2, adv_r2 = advance(il2, ir2, RETRY_DEPTH * tau)[:2] if len(il2) + len(ir2) else (none, none)
-        moving[0, il[~adv_l]] = False  # those retried and moved march on
-        moving[1, ir[~adv_r]] = False
-        moving[0, il2[adv_l2]] = True
-        moving[1, ir2[adv_r2]] = True
+        adv_l2, adv_r2 = advance(il2, ir2, RETRY_DEPTH * tau) if len(il2) + len(ir2) else (none, none)
+        moving[0, il2[~adv_l2]] = False
+        moving[1, ir2[~adv_r2]] = False
     ends = np.concatenate([dihedra.origin[d], dihedra.origin[d] + L[:, None] * w])
     if through is None:
         open_ends = ~caster.occluded(np.concatenate([S, S]), ends)
