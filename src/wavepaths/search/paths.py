@@ -335,29 +335,34 @@ def coincident_paths(tx_index: np.ndarray, rx_index: np.ndarray, depth: np.ndarr
     return drop
 
 
+def _pad_columns(a: np.ndarray, width: int, fill) -> np.ndarray:
+    """``a`` (N, w, ...) widened to ``width`` columns with ``fill``."""
+    extra = width - a.shape[1]
+    if extra == 0:
+        return a
+    return np.concatenate([a, np.full((a.shape[0], extra) + a.shape[2:], fill, dtype=a.dtype)], axis=1)
+
+
+def _pad_vertices(v: np.ndarray, width: int) -> np.ndarray:
+    """Vertices ``v`` (N, w, 3) widened to ``width`` points by repeating the last (the receiver)."""
+    extra = width - v.shape[1]
+    return v if extra == 0 else np.concatenate([v, np.repeat(v[:, -1:], extra, axis=1)], axis=1)
+
+
 def concatenate(first: Paths, second: Paths) -> Paths:
     """The paths of ``first`` then those of ``second`` (found for the same transmitters and
     receivers), padded to the deeper of the two as :func:`assemble` pads: ``NONE`` interactions,
     primitives and triangles -1, the receiver repeated in ``vertices``. Unsorted; the stats
     are ``first``'s."""
-    dmax = max(first.interactions.shape[1], second.interactions.shape[1])
-
-    def pad(a: np.ndarray, fill) -> np.ndarray:
-        extra = dmax - a.shape[1]
-        return a if extra == 0 else np.concatenate([a, np.full((len(a), extra), fill, dtype=a.dtype)], axis=1)
-
-    def pad_vertices(v: np.ndarray) -> np.ndarray:
-        extra = dmax + 2 - v.shape[1]
-        return v if extra == 0 else np.concatenate([v, np.repeat(v[:, -1:], extra, axis=1)], axis=1)
-
+    d = max(first.interactions.shape[1], second.interactions.shape[1])
     return Paths(first.tx_positions, first.rx_positions,
                  np.concatenate([first.tx_index, second.tx_index]), np.concatenate([first.rx_index, second.rx_index]),
                  np.concatenate([first.depth, second.depth]),
-                 np.concatenate([pad(first.interactions, 0), pad(second.interactions, 0)]).astype(np.int8),
-                 np.concatenate([pad(first.primitive, -1), pad(second.primitive, -1)]),
-                 np.concatenate([pad(first.triangle, -1), pad(second.triangle, -1)]),
+                 np.concatenate([_pad_columns(p.interactions, d, 0) for p in (first, second)]).astype(np.int8),
+                 np.concatenate([_pad_columns(p.primitive, d, -1) for p in (first, second)]),
+                 np.concatenate([_pad_columns(p.triangle, d, -1) for p in (first, second)]),
                  np.concatenate([first.wedge_faces, second.wedge_faces]),
-                 np.concatenate([pad_vertices(first.vertices), pad_vertices(second.vertices)]), dict(first.stats))
+                 np.concatenate([_pad_vertices(p.vertices, d + 2) for p in (first, second)]), dict(first.stats))
 
 
 def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True,
@@ -377,27 +382,14 @@ def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: di
         return Paths(tx, rx, z, z, z, np.zeros((0, dmax), np.int8), np.zeros((0, dmax), np.int64),
                      np.zeros((0, dmax), np.int64), np.zeros((0, 2), np.int64), np.zeros((0, dmax + 2, 3)), stats)
 
-    def pad(a: np.ndarray, width: int, fill) -> np.ndarray:
-        extra = width - a.shape[1]
-        if extra == 0:
-            return a
-        shape = (a.shape[0], extra) + a.shape[2:]
-        return np.concatenate([a, np.full(shape, fill, dtype=a.dtype)], axis=1)
-
-    verts = []
-    for b in batches:
-        v = b.vertices
-        extra = dmax + 2 - v.shape[1]
-        if extra:
-            v = np.concatenate([v, np.repeat(v[:, -1:], extra, axis=1)], axis=1)
-        verts.append(v)
+    verts = [_pad_vertices(b.vertices, dmax + 2) for b in batches]
     depth = np.concatenate([np.full(len(b.tx_index), b.interactions.shape[1]) for b in batches])
     txi = np.concatenate([b.tx_index for b in batches])
     rxi = np.concatenate([b.rx_index for b in batches])
     vertices = np.concatenate(verts)
-    kinds = np.concatenate([pad(b.interactions, dmax, 0) for b in batches]).astype(np.int8)
-    prims = np.concatenate([pad(b.primitive, dmax, -1) for b in batches])
-    tri = np.concatenate([pad(b.triangle, dmax, -1) for b in batches])
+    kinds = np.concatenate([_pad_columns(b.interactions, dmax, 0) for b in batches]).astype(np.int8)
+    prims = np.concatenate([_pad_columns(b.primitive, dmax, -1) for b in batches])
+    tri = np.concatenate([_pad_columns(b.triangle, dmax, -1) for b in batches])
     wedge = np.concatenate([b.wedge_faces for b in batches])
     if sort:
         d = np.diff(vertices, axis=1)
