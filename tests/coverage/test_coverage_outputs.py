@@ -127,6 +127,15 @@ def test_incoherent_best_server_on_a_traced_map(canyon):
                     settings=IN_PROCESS)
     want = np.nanmax(cmap.path_gain_per_tx(coherent=False), axis=0)
     np.testing.assert_array_equal(cmap.path_gain(coherent=False), want)
+    # every reading picks its transmitter the same way: the field strength too (a review found it
+    # read the coherent best server's transmitter, up to 16.6 dB off in 186 of 2,800 cells)
+    for coherent in (True, False):
+        best = np.maximum(cmap.best_server_by(coherent), 0)
+        for name in ("received_power_dbm", "field_strength_dbuv_m"):
+            per_tx = np.stack([getattr(cmap, name)(tx, coherent) for tx in range(2)])
+            np.testing.assert_array_equal(getattr(cmap, name)(None, coherent),
+                                          np.take_along_axis(per_tx, best[None], axis=0)[0], err_msg=name)
+    assert (cmap.best_server_by(False) != cmap.best_server_by(True)).any()  # the readings differ here
 
 
 # ---- field strength: the field at the cell, whatever the receive antenna ----------------------

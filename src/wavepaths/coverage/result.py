@@ -246,7 +246,8 @@ class CoverageMap:
     def field_strength_dbuv_m(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
         """shape float64: field strength [dBuV/m] for ``tx_power_dbm``: the field at the cell
         whatever the receive antenna (the transmit antenna's gain included), of transmitter
-        ``tx`` or of the best server (:attr:`best_server`).
+        ``tx`` or of the best server of the same reading (:meth:`best_server_by` of
+        ``coherent``, as :meth:`path_gain` and :meth:`received_power_dbm` pick it).
 
         ``E = sqrt(eta_0 P_t 4 pi g) / lambda`` with ``g`` the :meth:`field_gain_per_tx`
         (:func:`field_strength_dbuv_m` of ``P_t g``, the power an isotropic antenna matched
@@ -258,7 +259,7 @@ class CoverageMap:
         antenna raises :class:`WavepathsError`).
         """
         if self.field_total is not None:
-            g = self._select(self.field_gain_per_tx(coherent), tx)
+            g = self._select(self.field_gain_per_tx(coherent), tx, coherent)
             return field_strength_dbuv_m(self.tx_power_dbm + _db(g), self.frequency_hz)
         if not self.has_field_strength:
             raise WavepathsError(

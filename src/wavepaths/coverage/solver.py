@@ -19,7 +19,6 @@ a receiver at the cell centre.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 
 import dataclasses
@@ -230,7 +229,6 @@ def path_mechanism(paths: Paths) -> np.ndarray:
     return np.where(paths.depth == 0, 0, np.where(diffracted, 2, 1))
 
 
-@functools.lru_cache(maxsize=16)
 def _fields_sums(scene: Scene, config: FieldConfig, paths: Paths, m: int, k: int):
     """(pair, key, a_phased, power) of ``paths``: indices for the per-cell sums and the values,
     in the canonical order of :func:`wavepaths.search.paths.path_order`, whatever order
