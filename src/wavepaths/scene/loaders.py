@@ -28,9 +28,10 @@ from ..em.materials import PEC, Material, as_material, material_by_name
 from ..errors import SceneError, WavepathsError
 from .builtin import BUILTIN_SCENES, builtin_arrays
 from .mitsuba import read_mitsuba_xml
-from .model import Scene, WavepathsWarning, build_scene, external_stacklevel
+from .model import Scene, WavepathsWarning, build_scene, external_stacklevel, scene_size
 from .obj_reader import polygon_triangles, read_obj
 from .ply_off_reader import read_off, read_ply
+from .precision import float32_reach, warn_float32_coordinates
 from .tolerances import SceneTolerances
 
 MESH_FORMATS = (".obj", ".ply", ".stl", ".gltf", ".glb", ".off")
@@ -142,7 +143,10 @@ def _read_polygon_file(path: str, ext: str, material: Material, tolerances: Scen
 
 
 def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances | None = None,
-                    up_axis: str = "auto", materials: Mapping[str, Material | str] | None = None):
+                    up_axis: str = "auto", materials: Mapping[str, Material | str] | None = None,
+                    reaches: list | None = None):
+    """Scene arrays of a mesh file; ``reaches`` (optional) gets ``(path, largest coordinate)``
+    if the file stores float32 positions (:func:`~wavepaths.scene.precision.float32_reach`)."""
     ext = os.path.splitext(path)[1].lower()
     # the formats read here (their polygons split exactly), the others through trimesh below
     own = {".obj": lambda: _read_obj_file(path, material, tolerances, materials),
@@ -155,6 +159,8 @@ def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances |
             raise
         except Exception as exc:
             raise SceneError(f"{path}: cannot read mesh ({exc})") from None
+        if reaches is not None:
+            reaches.append((path, float32_reach(path, v)))
         if _rotates_to_z_up(ext, up_axis):
             v = v @ Y_UP_TO_Z_UP.T
         return v, t, o, m, names, table
@@ -182,6 +188,8 @@ def _read_mesh_file(path: str, material: Material, tolerances: SceneTolerances |
         offset += len(v)
     tri = np.concatenate(tris)
     vertices = np.concatenate(verts)
+    if reaches is not None:
+        reaches.append((path, float32_reach(path, vertices)))
     if _rotates_to_z_up(ext, up_axis):
         vertices = vertices @ Y_UP_TO_Z_UP.T
     tmat_all, table = _used_materials(np.concatenate(tmat), [material, *mats])
@@ -286,6 +294,7 @@ def load_scene(
     if (given or materials) and (source in BUILTIN_SCENES or source.lower().endswith(".xml")):
         warnings.warn(f"{source}: `material` and `materials` apply to mesh files; this scene's materials are its own",
                       WavepathsWarning, stacklevel=external_stacklevel())
+    reaches: list[tuple[str, float]] = []  # float32 files and their largest coordinate
     if source in BUILTIN_SCENES:
         _refuse_y_up(axis, source)
         arrays = builtin_arrays(source)
@@ -304,13 +313,17 @@ def load_scene(
         ext = os.path.splitext(source)[1].lower()
         if ext == ".xml":
             _refuse_y_up(axis, source)
-            arrays = read_mitsuba_xml(source)
+            arrays = read_mitsuba_xml(source, reaches)
         elif ext in MESH_FORMATS:
-            arrays = _read_mesh_file(source, material, tolerances, axis, materials)
+            arrays = _read_mesh_file(source, material, tolerances, axis, materials, reaches)
         else:
             raise SceneError(f"{source}: unknown format '{ext}' (expected .xml or one of {', '.join(MESH_FORMATS)})")
     v, t, o, m, names, mats = arrays
     warn_transparent_materials(source, o, m, names, mats)
+    reaches = [r for r in reaches if r[1] > 0]
+    if reaches:
+        weld = (tolerances or SceneTolerances()).weld * (scene_size(v[np.unique(t)]) or 1.0)
+        warn_float32_coordinates(source, reaches, weld)
     return build_scene(v, t, o, m, names, mats, source=source, tolerances=tolerances)
 
 

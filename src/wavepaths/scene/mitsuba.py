@@ -42,6 +42,7 @@ from ..em.materials import ITU_MATERIALS, Material, material_from_sionna
 from ..errors import SceneError, WavepathsError
 from .model import WavepathsWarning
 from .obj_reader import concave_obj_faces
+from .precision import float32_reach
 
 _RADIO_BSDFS = ("itu-radio-material", "radio-material", "absorber-radio-material")
 # Mitsuba objects that carry no geometry or radio material: read past, not an error.
@@ -417,8 +418,10 @@ def _warn_concave_faces(mesh_path: str, where: str, sid: str) -> None:
     )
 
 
-def _shape_geometry(shape: ET.Element, src: _Source, sid: str) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices ``(v, 3)`` [m] in world coordinates and faces ``(f, 3)`` of one shape."""
+def _shape_geometry(shape: ET.Element, src: _Source, sid: str,
+                    reaches: list | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``(v, 3)`` [m] in world coordinates and faces ``(f, 3)`` of one shape; a mesh
+    file's float32 reach appended to ``reaches`` (see :func:`read_mitsuba_xml`)."""
     where = src.path
     stype = shape.get("type")
     if stype in ("ply", "obj", "stl"):
@@ -443,6 +446,8 @@ def _shape_geometry(shape: ET.Element, src: _Source, sid: str) -> tuple[np.ndarr
                 f"{where}: shape '{sid}': mesh file '{fname}' has no faces (a point cloud?); "
                 "Sionna RT cannot load it either"
             )
+        if reaches is not None:
+            reaches.append((mesh_path, float32_reach(mesh_path, v)))
     elif stype == "rectangle":
         v, f = _unit_rectangle()
     elif stype == "cube":
@@ -453,8 +458,12 @@ def _shape_geometry(shape: ET.Element, src: _Source, sid: str) -> tuple[np.ndarr
     return v @ m[:3, :3].T + m[:3, 3], f
 
 
-def read_mitsuba_xml(path: str):
+def read_mitsuba_xml(path: str, reaches: list | None = None):
     """Parse a Mitsuba XML scene into raw arrays (see :func:`wavepaths.scene.loaders.load_scene`).
+
+    ``reaches`` (optional) gets, for each mesh file, ``(file, largest coordinate magnitude
+    as stored)`` if it stores float32 positions, else ``(file, 0.0)``
+    (:func:`~wavepaths.scene.precision.float32_reach`: its own coordinates, before ``to_world``).
 
     Returns
     -------
@@ -495,7 +504,7 @@ def read_mitsuba_xml(path: str):
             taken.add(name)
             sid = name
         owner[name] = sid
-        v, f = _shape_geometry(shape, src, sid)
+        v, f = _shape_geometry(shape, src, sid, reaches)
         bsdf, bsrc, outermost = _shape_material(shape, src, reader)
         if id(bsdf) not in mat_cache:
             mat_cache[id(bsdf)] = _material_of(bsdf, bsrc, reader, outermost)

@@ -57,6 +57,19 @@ def _bsdf_xml(mat: Material, ident: str) -> ET.Element:
     return b
 
 
+def _local_origin(scene) -> np.ndarray | None:
+    """Where to put the meshes' origin: ``None`` (the world's) when float32 keeps the scene's
+    coordinates within a tenth of its weld tolerance, else the centre of its bounding box to
+    the metre, which each shape's ``to_world`` translate then adds back in float64
+    (:mod:`wavepaths.scene.precision`: a city in UTM coordinates would lose 0.3 m)."""
+    from .precision import FLOAT32_ROUNDING, WARN_FRACTION
+
+    weld = scene.length_tolerance(scene.tolerances.weld)
+    if np.abs(scene.vertices).max() * FLOAT32_ROUNDING < WARN_FRACTION * weld:
+        return None
+    return np.round(0.5 * (scene.vertices.min(axis=0) + scene.vertices.max(axis=0)))
+
+
 def _file_stem(name: str) -> str:
     """A portable file name part for an object name: no separators, no odd characters."""
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._")
@@ -79,6 +92,10 @@ def write_mitsuba_xml(scene, path: str, mesh_dir: str = "meshes") -> list[str]:
     ``<name>_<material index>``. Names that would repeat (two objects of the same name) get a
     suffix ``-2``, ``-3``, ... with a :class:`WavepathsWarning`, since Sionna RT refuses
     duplicate names. Mesh files are numbered and keep only portable characters of the name.
+    The PLY files store float32 vertices: a scene far from the origin (projected
+    coordinates) is written around the centre of its box instead, and each shape's
+    ``to_world`` translate puts it back (wavepaths applies it in float64; Sionna RT, which
+    computes in float32, rounds the sum as it would the coordinates).
 
     Parameters
     ----------
@@ -121,16 +138,21 @@ def write_mitsuba_xml(scene, path: str, mesh_dir: str = "meshes") -> list[str]:
         )
     width = len(str(len(parts)))
     written = []
+    origin = _local_origin(scene)
     for k, ((o, m), name) in enumerate(zip(parts, names)):
         sel = (scene.triangle_object == o) & (scene.triangle_material == m)
         used, faces = np.unique(scene.triangles[sel], return_inverse=True)
-        mesh = trimesh.Trimesh(scene.vertices[used], faces.reshape(-1, 3), process=False)
+        local = scene.vertices[used] if origin is None else scene.vertices[used] - origin
+        mesh = trimesh.Trimesh(local, faces.reshape(-1, 3), process=False)
         rel = f"{mesh_dir}/{k:0{width}d}-{_file_stem(name)}.ply"
-        mesh.export(os.path.join(out_dir, rel), file_type="ply", encoding="binary")
+        mesh.export(os.path.join(out_dir, rel), file_type="ply", encoding="binary")  # float32 vertices
         written.append(os.path.join(out_dir, rel))
         shape = ET.SubElement(root, "shape", type="ply", id=f"mesh-{name}")
         ET.SubElement(shape, "string", name="filename", value=rel)
         ET.SubElement(shape, "boolean", name="face_normals", value="true")
+        if origin is not None:
+            to_world = ET.SubElement(shape, "transform", name="to_world")
+            ET.SubElement(to_world, "translate", **{a: repr(float(c)) for a, c in zip("xyz", origin)})
         ET.SubElement(shape, "ref", id=ids[m], name="bsdf")
     ET.indent(root)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
