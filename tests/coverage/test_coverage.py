@@ -184,6 +184,30 @@ def test_solids_across_objects_and_within_components():
     np.testing.assert_array_equal(inside_solid_objects(awning, [[2, 2, 2], [5, 2, 3.9]]), [True, False])
 
 
+@pytest.mark.parametrize("copy", ["same_winding", "reversed_winding"])
+def test_a_double_sided_export_keeps_its_inside(copy):
+    """Every face written twice (double-sided exports): each crossing counted twice made ray
+    parity call every point outside (a review: a map's 328 inside cells became 0). A solid whose
+    triangles all come in pairs counts each once; two touching blocks' coincident faces on a
+    shared wall, in a solid where the other faces are single, still both count."""
+    from wavepaths.scene.builtin import builtin_arrays
+
+    v, t, o, m, names, mats = builtin_arrays("box_on_ground")
+    twin = t if copy == "same_winding" else t[:, ::-1]
+    scene = build_scene(v, np.vstack([t, twin]), np.concatenate([o, o]), np.concatenate([m, m]), names, mats)
+    clean = build_scene(v, t, o, m, names, mats)
+    pts = np.array([[0.0, 0.0, 5.0], [0.3, 0.2, 1.5], [20.0, 0.0, 1.5], [0.0, 0.0, 50.0]])
+    want = inside_solid_objects(clean, pts)
+    assert want.tolist() == [True, True, False, False]
+    np.testing.assert_array_equal(inside_solid_objects(scene, pts), want)
+    # a party wall: two closed blocks, each with its own face on x = 0 (the same corners)
+    from ..conftest import boxes_scene
+
+    party = boxes_scene([((-10, -5, 0), (0, 5, 15)), ((0, -5, 0), (10, 5, 15))], ground=50)
+    inner = np.array([[-5.0, 0.0, 3.0], [5.0, 0.0, 3.0], [-0.01, 4.9, 14.9], [0.01, -4.9, 0.1], [20.0, 0.0, 3.0]])
+    np.testing.assert_array_equal(inside_solid_objects(party, inner), [True, True, True, True, False])
+
+
 # ---- files and pictures -----------------------------------------------------------------
 def test_npz_round_trip_and_keys(canyon_map, tmp_path):
     path = canyon_map.save(tmp_path / "map.npz")

@@ -23,6 +23,8 @@ triangle) pair in the same bin gets a 2-D point-in-triangle test and a height
 comparison. No Embree, no float32.
 
 Points lying exactly on a surface of a solid are on its boundary: either answer may come.
+A solid written double-sided (every face twice, as some exporters do) would cancel every
+crossing; its triangles count once each (:func:`_undoubled`).
 
 This is wavepaths' one "is a point inside" rule: :mod:`wavepaths.scene.closed` applies it
 (:func:`inside_solids`, per solid) to transmitters inside closed objects and to the sides of
@@ -134,11 +136,54 @@ def solid_objects(scene: "Scene") -> SolidObjects:
     is_comp = ids < n_comp
     closed = np.where(is_comp, closed_c[np.minimum(ids, n_comp - 1)], closed_p[np.maximum(ids - n_comp, 0)])
     base_z = np.where(is_comp, base_c[np.minimum(ids, n_comp - 1)], base_p[np.maximum(ids - n_comp, 0)])
+    tris, owner = _undoubled(scene, tris, owner)
     pairs = np.unique(np.stack([owner, scene.triangle_object[tris]], axis=1), axis=0)  # sorted by solid
     groups = np.split(pairs[:, 1], np.cumsum(np.bincount(pairs[:, 0], minlength=len(ids)))[:-1])
     objects = np.empty(len(ids), dtype=object)
     objects[:] = [tuple(g.tolist()) for g in groups]
     return SolidObjects(objects, closed, base_z, tris, owner)
+
+
+def _undoubled(scene: "Scene", tris: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``tris`` (with their solids ``owner``) with each doubled solid halved.
+
+    A double-sided export writes every face twice (the same corners, either winding): each
+    crossing then counts twice and ray parity calls every point outside. A solid in which
+    every triangle (by its corners) occurs an even number of times keeps half of each, if
+    that half bounds a region (every edge in an even number of its triangles but at its
+    base); in any other solid coincident triangles stay (two touching buildings' faces on
+    their shared wall, both counted, leave it inside neither's region: the parity of their
+    union).
+    """
+    corners = np.sort(scene.triangles[tris], axis=1)
+    _, first, inverse, counts = np.unique(np.column_stack([owner, corners]), axis=0, return_index=True,
+                                          return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    doubled = np.ones(int(owner.max()) + 1 if len(owner) else 0, bool)
+    np.logical_and.at(doubled, owner[first], counts % 2 == 0)
+    if not doubled.any():
+        return tris, owner
+    # the k-th copy of each triangle, by position: the first half of the copies kept
+    order = np.argsort(inverse, kind="stable")
+    rank = np.empty(len(tris), np.int64)
+    rank[order] = np.arange(len(tris)) - np.repeat(np.cumsum(counts) - counts, counts)
+    keep = ~doubled[owner] | (rank < counts[inverse] // 2)
+    # a doubled solid whose half bounds no region (a wall duplicated in two objects, a flat
+    # sheet) keeps no triangle: never inside, as when its copies cancelled
+    half = keep & doubled[owner]
+    tri = scene.triangles[tris[half]]
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    solid = np.tile(owner[half], 3)
+    key, n = np.unique(np.column_stack([solid, edges]), axis=0, return_counts=True)
+    z = scene.vertices[:, 2]
+    zmin = np.full(len(doubled), np.inf)
+    np.minimum.at(zmin, owner[half], z[tri].min(axis=1))
+    tol = scene.length_tolerance(scene.tolerances.plane_distance)
+    open_edge = (n % 2 == 1) & (np.maximum(z[key[:, 1]], z[key[:, 2]]) > zmin[key[:, 0]] + tol)
+    broken = np.zeros(len(doubled), bool)
+    broken[key[open_edge, 0]] = True
+    keep &= ~broken[owner]
+    return tris[keep], owner[keep]
 
 
 def inside_solid_objects(scene: "Scene", points: np.ndarray, solids: SolidObjects | None = None) -> np.ndarray:
