@@ -530,6 +530,34 @@ def test_cell_centres_on_walls_are_reported(canyon):
     coverage(canyon, [-60, 0, 10], shifted, opts, settings=IN_PROCESS)  # no warning (warnings are errors here)
 
 
+@pytest.mark.parametrize("variant", ["one_object", "flipped_walls", "no_floors"])
+def test_cells_on_walls_are_masked_whatever_the_files_objects(canyon, variant):
+    """The same walls packed differently (every face in one object, some faces wound the other
+    way, the buildings without floors: none of them a closed object by itself) mask the same
+    cells on the walls as the street canyon's closed buildings (a review found some traced)."""
+    from wavepaths.scene.model import WavepathsWarning
+
+    obj, tri = canyon.triangle_object.copy(), canyon.triangles.copy()
+    names = list(canyon.object_names)
+    if variant == "one_object":
+        obj[:], names = 0, ["city"]
+    elif variant == "flipped_walls":
+        tri[::3] = tri[::3, ::-1]
+    keep = np.ones(len(tri), bool)
+    if variant == "no_floors":
+        n = canyon.polygon_normal[canyon.triangle_polygon]
+        keep = ~((n[:, 2] < -0.99) & (canyon.vertices[tri][:, :, 2].max(axis=1) < 1e-9))
+    scene = build_scene(canyon.vertices, tri[keep], obj[keep], canyon.triangle_material[keep], names,
+                        list(canyon.materials))
+    assert not scene.solid_object_mask.any() or variant == "no_floors"
+    opts = TraceOptions(max_reflections=0, diffraction=False)
+    grid = PlanarGrid(center=[-45.0, 0.0], size=[2.0, 60.0], cell_size=2.0, height=1.5)
+    with pytest.warns(WavepathsWarning, match=r"cell centres lie exactly on a face: 16 on the surface"):
+        cmap = coverage(scene, [-60, 0, 10], grid, opts, settings=IN_PROCESS)
+    y = grid.cell_centers().reshape(-1, 3)[:, 1]
+    np.testing.assert_array_equal(cmap.inside.reshape(-1), (np.abs(y) >= 10) & (np.abs(y) <= 25))
+
+
 @pytest.mark.parametrize("suffix, up_axis", [(".glb", "auto"), (".obj", "y")])
 def test_a_measurement_mesh_is_turned_up_as_its_scene_is(tmp_path, suffix, up_axis):
     """A +Y-up measurement plane at y = 1.5 (glTF by its specification, an OBJ with

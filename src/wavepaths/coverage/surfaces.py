@@ -20,18 +20,41 @@ from ..search.on_faces import points_on_faces
 from ..search.paths import Paths
 
 
-def cells_on_faces(scene: Scene, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def cells_on_faces(scene: Scene, flat: np.ndarray, solids=None) -> tuple[np.ndarray, np.ndarray]:
     """``(faces, on_solid)`` of cell centres ``flat``: a polygon each lies exactly on (-1: none,
-    :func:`~wavepaths.search.on_faces.points_on_faces`) and whether it lies on a face of a
-    solid object. Skipped (none on a face) beyond the on-face test's budget of point x polygon tests."""
+    :func:`~wavepaths.search.on_faces.points_on_faces`) and whether it lies on a solid's
+    surface. Skipped (none on a face) beyond the on-face test's budget of point x polygon tests.
+
+    On a solid's surface: on a face of a closed object (:func:`~wavepaths.scene.closed.solid_objects_mask`),
+    or where the face bounds a solid of the inside mask's own rule
+    (:func:`~wavepaths.coverage.inside.inside_solid_objects` with ``solids``, by default
+    :func:`~wavepaths.coverage.inside.solid_objects`, which spans objects): the points a few
+    plane tolerances off the face on one side, tilted four ways along it (so that a cell on a
+    building's corner reaches into it), meet a solid, and those on the other side do not. The
+    second rule does not depend on how a file groups faces into objects or orients them (a
+    review: cells on walls were masked when each building was its own object and traced when
+    the same walls came in one object).
+    """
     from ..scene.closed import solid_objects_mask
     from ..search.on_faces import points_on_surfaces
+    from .inside import inside_solid_objects, solid_objects
 
     faces = points_on_faces(scene, flat)
     on_solid = np.zeros(len(flat), bool)
-    if (faces >= 0).any():
-        rows = np.nonzero(faces >= 0)[0]
-        on_solid[rows] = points_on_surfaces(scene, flat[rows])[:, solid_objects_mask(scene)].any(axis=1)
+    if not (faces >= 0).any():
+        return faces, on_solid
+    rows = np.nonzero(faces >= 0)[0]
+    on_solid[rows] = points_on_surfaces(scene, flat[rows])[:, solid_objects_mask(scene)].any(axis=1)
+    n = scene.polygon_normal[faces[rows]]
+    t1 = np.cross(n, np.where(np.abs(n[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]]))
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    h = 4 * scene.length_tolerance(scene.tolerances.plane_distance)
+    tilts = [a * t1 + b * t2 for a, b in ((0.5, 0.5), (0.5, -0.5), (-0.5, 0.5), (-0.5, -0.5))]
+    pts = np.concatenate([flat[rows] + h * (side * n + tilt) for side in (1.0, -1.0) for tilt in tilts])
+    inside = inside_solid_objects(scene, pts, solid_objects(scene) if solids is None else solids)
+    inside = inside.reshape(2, len(tilts), len(rows)).any(axis=1)
+    on_solid[rows] |= inside[0] != inside[1]
     return faces, on_solid
 
 
