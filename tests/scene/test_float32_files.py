@@ -99,3 +99,12 @@ def test_write_mitsuba_xml_keeps_a_far_scene_exact(canyon, tmp_path):
     # a scene near the origin is written as before, without a translate
     near = write_mitsuba_xml(canyon, str(tmp_path / "near.xml"))
     assert "translate" not in Path(near[0]).read_text()
+
+
+def test_a_scene_in_millimetres_is_warned_about(canyon, tmp_path):
+    obj = tmp_path / "mm.obj"
+    obj.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in (1000.0 * canyon.vertices).tolist())
+                   + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in canyon.triangles))
+    said = loaded(obj)[1]
+    assert len(said) == 1 and "km; wavepaths reads coordinates in metres" in said[0]
+    assert loaded(write_ply(tmp_path / "m.ply", canyon.vertices, canyon.triangles, "double"))[1] == []

@@ -35,6 +35,10 @@ from .precision import float32_reach, warn_float32_coordinates
 from .tolerances import SceneTolerances
 
 MESH_FORMATS = (".obj", ".ply", ".stl", ".gltf", ".glb", ".off")
+LARGE_SCENE_M = 100e3
+"""A scene file whose extent (:func:`~wavepaths.scene.model.scene_size`) exceeds this [m]
+is warned about: most likely in millimetres or centimetres (a 220 m street model in mm
+spans 220 km), as wavepaths reads metres."""
 # Formats whose files are +Y up by their specification (glTF 2.0, section "Coordinate System and Units").
 Y_UP_FORMATS = (".gltf", ".glb")
 UP_AXES = ("auto", "y", "z")
@@ -320,10 +324,15 @@ def load_scene(
             raise SceneError(f"{source}: unknown format '{ext}' (expected .xml or one of {', '.join(MESH_FORMATS)})")
     v, t, o, m, names, mats = arrays
     warn_transparent_materials(source, o, m, names, mats)
-    reaches = [r for r in reaches if r[1] > 0]
-    if reaches:
-        weld = (tolerances or SceneTolerances()).weld * (scene_size(v[np.unique(t)]) or 1.0)
-        warn_float32_coordinates(source, reaches, weld)
+    if source not in BUILTIN_SCENES:
+        size = scene_size(v[np.unique(t)]) if len(t) else 0.0
+        reaches = [r for r in reaches if r[1] > 0]
+        if reaches:
+            warn_float32_coordinates(source, reaches, (tolerances or SceneTolerances()).weld * (size or 1.0))
+        if size > LARGE_SCENE_M:
+            warnings.warn(f"{source}: the scene spans {size / 1e3:.4g} km; wavepaths reads coordinates in metres: "
+                          "if the file is in millimetres or centimetres, scale it", WavepathsWarning,
+                          stacklevel=external_stacklevel())
     return build_scene(v, t, o, m, names, mats, source=source, tolerances=tolerances)
 
 
