@@ -91,6 +91,27 @@ def test_the_exact_solutions_decide_who_matches(quick_report):
         assert known[k]["matches_exact"] == "wavepaths UTD", (k, known[k])
 
 
+def test_lines_record_each_engines_paths_and_sionnas_delay_floor(quick_report):
+    """Each boundary line says how many paths of each kind each engine kept, and what Sionna's
+    float32 delays cost there: an engine missing a mechanism's paths (Sionna on the wedge line,
+    a review found) is off the exact solution for that reason, not for its coefficients."""
+    out, summary = quick_report
+    for name, line in summary["lines"].items():
+        n = len(line["phi_deg"])
+        counts = line["path_counts"]
+        for field in ("soft", "hard"):
+            mine = counts["wavepaths"][field]
+            assert mine["D"] == n and mine["LOS"] > 0 and mine["R"] > 0, (name, field, mine)  # one diffraction each
+            theirs = counts["Sionna RT"][field]
+            assert set(theirs) == {"LOS", "R", "D"} and theirs["LOS"] <= n
+            floor = line["sionna_delay_phase_rad"][field]
+            assert 0 < floor["rms_rad"] <= floor["max_rad"] < 1.0 and floor["paths"] == sum(theirs.values())
+            # wavepaths' own UTD with float32-rounded delays: the floor moves a correct model off too
+            assert floor["utd_with_these_delays"]["max_db"] > line["errors"]["wavepaths UTD (" + field + ")"]["max_db"]
+    page = (out / "report.html").read_text()
+    assert page.count("Paths kept at the") == len(summary["lines"])
+
+
 def test_every_sionna_path_is_found_by_wavepaths(quick_report):
     from wavepaths.validation.disagreements import SIONNA_ONLY_FAILURE
 

@@ -18,7 +18,7 @@ both divided by ``lambda / (4 pi s') e^{-jks'}``, the incident field at the edge
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,6 +44,14 @@ class BoundaryLine:
     k_rho: float
     curves: dict  # (label, polarization) -> (k,) complex u
     boundaries_deg: dict
+    # engine -> field ("soft"/"hard") -> {"LOS", "R", "D"} paths kept on the line: an engine
+    # that misses a mechanism's paths is off the exact solution for that reason
+    path_counts: dict = field(default_factory=dict)
+    # field -> {"rms_rad", "max_rad", "paths"}: k (c tau - l) of Sionna's kept paths, its float32
+    # delay against the float64 length of its own polyline (10 km of path: a phase floor), and
+    # "utd_with_these_delays": {"max_db", "max_complex_error"} of wavepaths' UTD against the exact
+    # solution with its own delays rounded to float32 (the floor's effect on a correct model)
+    sionna_delay_phase: dict = field(default_factory=dict)
 
 
 def _u(geometry_dirs, vertices_list, a, lengths, rx_index, n_rx, k, polarization, s_prime):
@@ -57,6 +65,20 @@ def _u(geometry_dirs, vertices_list, a, lengths, rx_index, n_rx, k, polarization
     np.add.at(out, rx_index, sign * a * s_tx * s_rx * np.exp(-1j * k * lengths))
     lam = 2 * np.pi / k
     return out / (lam / (4 * np.pi * s_prime) * np.exp(-1j * k * s_prime))
+
+
+def _mechanism_counts(depth: np.ndarray, interactions: np.ndarray) -> dict:
+    """``{"LOS", "R", "D"}``: how many of the kept paths (depth <= 1) are of each kind."""
+    first = np.where(depth > 0, interactions[:, 0], 0)
+    return {"LOS": int((depth == 0).sum()), "R": int(((depth > 0) & (first == 1)).sum()),
+            "D": int(((depth > 0) & (first == 2)).sum())}
+
+
+def _polyline_lengths(v: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(N,) float64 length of each path's polyline ``v`` (N, D + 2, 3), its ``depth + 1`` segments."""
+    seg = np.linalg.norm(np.diff(v, axis=1), axis=2)
+    used = np.arange(seg.shape[1])[None, :] <= depth[:, None]
+    return np.where(used, np.nan_to_num(seg), 0.0).sum(axis=1)
 
 
 def _geometry(scene_name: str):
@@ -99,14 +121,22 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
     curves = {}
     p = trace(scene, tx, rx, TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=0))
     p = p.select(_keep_edge(p.vertices, p.depth, p.interactions, on_edge))
+    counts: dict = {}
+    delay_phase: dict = {}
+    float32_delays: dict = {}
     for pol in ("V", "H"):
         ant = Antenna("iso", pol)
+        counts.setdefault("wavepaths", {})[FIELD_OF_POLARIZATION[pol]] = _mechanism_counts(p.depth, p.interactions)
         for label, cfg in (("wavepaths UTD", FieldConfig(frequency_hz, "utd", tx_antenna=ant, rx_antenna=ant)),
                            ("wavepaths GTD", FieldConfig(frequency_hz, "gtd", tx_antenna=ant, rx_antenna=ant)),
                            ("wavepaths compat=sionna", FieldConfig(frequency_hz, "utd", "sionna", tx_antenna=ant, rx_antenna=ant))):
             r = compute_fields(scene, p, cfg)
             curves[(label, pol)] = _u((p.departure_directions, p.arrival_directions), None, r.a, p.lengths,
                                       p.rx_index, len(rx), k, pol, S_PRIME)
+            if label == "wavepaths UTD":  # the same UTD with its delays rounded as Sionna's are (float32)
+                rounded = np.float32(p.lengths / SPEED_OF_LIGHT).astype(np.float64) * SPEED_OF_LIGHT
+                float32_delays[pol] = _u((p.departure_directions, p.arrival_directions), None, r.a, rounded,
+                                         p.rx_index, len(rx), k, pol, S_PRIME)
         if with_sionna:
             from .sionna_runner import run_sionna_paths
 
@@ -123,17 +153,28 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             arr /= np.linalg.norm(arr, axis=1, keepdims=True)
             curves[("Sionna RT", pol)] = _u((dep, arr), None, sn.a[keep], sn.tau[keep] * SPEED_OF_LIGHT,
                                             sn.rx_index[keep], len(rx), k, pol, S_PRIME)
+            counts.setdefault("Sionna RT", {})[FIELD_OF_POLARIZATION[pol]] = _mechanism_counts(
+                d, sn.interactions[keep])
+            err = k * (sn.tau[keep] * SPEED_OF_LIGHT - _polyline_lengths(v, d))
+            delay_phase.setdefault(FIELD_OF_POLARIZATION[pol], {}).update({
+                "rms_rad": float(np.sqrt(np.mean(err**2))) if len(err) else None,
+                "max_rad": float(np.max(np.abs(err))) if len(err) else None, "paths": int(len(err))})
         soft_hard = "soft" if pol == "H" else "hard"
         phi = np.deg2rad(phi_deg)
         if n == 2.0:
             curves[("exact", pol)] = halfplane_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), soft_hard)
         else:
             curves[("exact", pol)] = wedge_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), n, soft_hard)
+        ref = curves[("exact", pol)]
+        u32 = float32_delays[pol]
+        d32 = 20 * np.log10(np.maximum(np.abs(u32), 1e-12) / np.maximum(np.abs(ref), 1e-12))
+        delay_phase.setdefault(soft_hard, {})["utd_with_these_delays"] = {
+            "max_db": float(np.max(np.abs(d32[np.abs(ref) > 0.05]))), "max_complex_error": float(np.max(np.abs(u32 - ref)))}
     candidates = {"shadow boundary": phi_p_deg + 180.0 if phi_p_deg < 180 else phi_p_deg - 180.0,
                   "0-face reflection boundary": 180.0 - phi_p_deg,
                   "n-face reflection boundary": (2 * n - 1) * 180 - phi_p_deg}
     bounds = {k: v for k, v in candidates.items() if 0 < v < n * 180}
-    return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds)
+    return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds, counts, delay_phase)
 
 
 # the antenna polarisation of a line's curves and the physical field it gives (module docstring)
@@ -170,6 +211,7 @@ def line_summary(line: BoundaryLine) -> dict:
     """
     return {"errors": line_errors(line), "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
             "boundaries_deg": {k: float(v) for k, v in line.boundaries_deg.items()}, "k_rho": float(line.k_rho),
+            "path_counts": line.path_counts, "sionna_delay_phase_rad": line.sionna_delay_phase,
             "curves": {curve_key(label, pol): {"re": np.real(u).tolist(), "im": np.imag(u).tolist()}
                        for (label, pol), u in line.curves.items()}}
 

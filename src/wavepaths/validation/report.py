@@ -207,6 +207,31 @@ def _fmt(x, spec=".3g"):
     return "-" if x is None else format(x, spec)
 
 
+def _line_paths_text(line: dict) -> str:
+    """The paths each engine kept on a boundary line (line of sight / reflections / diffractions
+    by the edge), and the phase floor of Sionna's float32 delays there: an engine missing a
+    mechanism's paths, or carrying that floor, is off the exact solution for that reason, not
+    for its coefficients. Empty for a summary written before these were recorded."""
+    counts = line.get("path_counts") or {}
+    if not counts:
+        return ""
+    e = html.escape
+    cells = "; ".join(f"{e(engine)} ({e(field)}): {c['LOS']} / {c['R']} / {c['D']}"
+                      for engine, by_field in counts.items() for field, c in by_field.items())
+    text = f"<p>Paths kept at the {len(line['phi_deg'])} receivers (line of sight / reflections / diffractions by the edge): {cells}."
+    phase = {f: v for f, v in (line.get("sionna_delay_phase_rad") or {}).items() if v.get("rms_rad") is not None}
+    if phase:
+        text += (" Sionna's delays are float32: against the float64 lengths of its own paths (10 km from the source) "
+                 "they put " + "; ".join(f"{e(f)}: {v['rms_rad']:.3f} rad rms, {v['max_rad']:.3f} max"
+                                          for f, v in phase.items())
+                 + " into its path phases. Rounded the same way, wavepaths' own UTD delays take it "
+                 + "; ".join(f"{e(f)}: {v['utd_with_these_delays']['max_db']:.2f} dB, "
+                             f"{v['utd_with_these_delays']['max_complex_error']:.3f} complex"
+                             for f, v in phase.items() if "utd_with_these_delays" in v)
+                 + " off the exact solution: a floor under Sionna's errors on this line.")
+    return text + "</p>"
+
+
 def _verdict_text(summary: dict) -> str:
     exact = summary["exact_comparison"]
     cases = "pass" if summary["cases_passed"] else "FAIL"
@@ -287,6 +312,7 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
                          f"<tr><td>{e(k)}</td><td>{_fmt(v['max_db'])}</td><td>{_fmt(v['median_db'])}</td>"
                          f"<td>{_fmt(v['max_complex_error'])}</td><td>{_within_text(exact, name, k)}</td></tr>"
                          for k, v in line["errors"].items()) + "</table>")
+        parts.append(_line_paths_text(line))
     cov = summary.get("coverage")
     if cov:
         parts.append("<h2>Coverage maps</h2><p>Sionna RT's <code>RadioMapSolver</code> (ray shooting, cell-averaged, "
