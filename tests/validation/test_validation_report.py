@@ -112,6 +112,23 @@ def test_lines_record_each_engines_paths_and_sionnas_delay_floor(quick_report):
     assert page.count("Paths kept at the") == len(summary["lines"])
 
 
+def test_the_report_records_what_a_reader_needs_to_recompute_it(quick_report):
+    """Receiver positions, frequency, antennas and sample counts of every case; the lines'
+    geometry; the coverage maps' frequency and area (a review could not reproduce a figure)."""
+    _, summary = quick_report
+    for c in summary["cases"]:
+        assert len(c["rx"]) == c["num_rx"] and np.isfinite(np.asarray(c["rx"], float)).all()
+        assert c["frequency_hz"] > 0 and c["samples_per_src"] > 0 and c["trace_options"]["max_reflections"] == c["max_depth"]
+    for name, line in summary["lines"].items():
+        st = line["settings"]
+        assert st["scene"] == name and st["phi_prime_deg"] == line["phi_prime_deg"]
+        k = 2 * np.pi * st["frequency_hz"] / 299_792_458.0
+        assert k * st["rho_m"] == pytest.approx(line["k_rho"])
+        assert np.linalg.norm(st["tx"]) == pytest.approx(st["source_distance_m"])
+    if summary.get("coverage"):
+        assert summary["coverage"]["frequency_hz"] > 0 and len(summary["coverage"]["size"]) == 2
+
+
 def test_every_sionna_path_is_found_by_wavepaths(quick_report):
     from wavepaths.validation.disagreements import SIONNA_ONLY_FAILURE
 

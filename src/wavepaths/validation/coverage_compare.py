@@ -29,7 +29,10 @@ def compare_coverage(scene_xml: str, tx, center, size, cell: float, max_depth: i
     scene = load_scene(scene_xml)
     tx = np.asarray(tx, dtype=float).reshape(1, 3)
     out = {"scene": scene_xml, "tx": tx[0].tolist(), "center": list(center), "size": list(size), "cell_m": cell,
-           "max_depth": max_depth, "noise_floor_db": NOISE_FLOOR_DB, "runs": {}}
+           "max_depth": max_depth, "noise_floor_db": NOISE_FLOOR_DB, "frequency_hz": frequency_hz,
+           "samples_per_tx": samples_per_tx, "antennas": "isotropic, V, both ends (Sionna's defaults)",
+           "field_model": "wavepaths: UTD (textbook), power sum at the cell centres; Sionna: RadioMapSolver, "
+                          "cell-averaged power", "runs": {}}
     for diffraction in (False, True):
         sn = run_sionna_radio_map(scene_xml, tx[0], center, size, (cell, cell), (0.0, 0.0, 0.0), frequency_hz,
                                   max_depth, diffraction, samples_per_tx)

@@ -52,6 +52,7 @@ class BoundaryLine:
     # "utd_with_these_delays": {"max_db", "max_complex_error"} of wavepaths' UTD against the exact
     # solution with its own delays rounded to float32 (the floor's effect on a correct model)
     sionna_delay_phase: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)  # what a reader needs to recompute the line
 
 
 def _u(geometry_dirs, vertices_list, a, lengths, rx_index, n_rx, k, polarization, s_prime):
@@ -174,7 +175,12 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
                   "0-face reflection boundary": 180.0 - phi_p_deg,
                   "n-face reflection boundary": (2 * n - 1) * 180 - phi_p_deg}
     bounds = {k: v for k, v in candidates.items() if 0 < v < n * 180}
-    return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds, counts, delay_phase)
+    settings = {"scene": scene_name, "material": "PEC", "frequency_hz": frequency_hz, "rho_m": rho,
+                "source_distance_m": S_PRIME, "phi_prime_deg": phi_p_deg, "phi_step_deg": 2.0,
+                "tx": tx[0].tolist(), "sionna_max_depth": 1, "sionna_samples_per_src": 1_000_000,
+                "kept": "line of sight, one reflection and the diffraction by the edge on the x axis",
+                "antennas": "isotropic, both ends: H gives the soft field, V the hard one"}
+    return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds, counts, delay_phase, settings)
 
 
 # the antenna polarisation of a line's curves and the physical field it gives (module docstring)
@@ -212,6 +218,7 @@ def line_summary(line: BoundaryLine) -> dict:
     return {"errors": line_errors(line), "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
             "boundaries_deg": {k: float(v) for k, v in line.boundaries_deg.items()}, "k_rho": float(line.k_rho),
             "path_counts": line.path_counts, "sionna_delay_phase_rad": line.sionna_delay_phase,
+            "settings": line.settings,
             "curves": {curve_key(label, pol): {"re": np.real(u).tolist(), "im": np.imag(u).tolist()}
                        for (label, pol), u in line.curves.items()}}
 

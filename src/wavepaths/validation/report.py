@@ -90,8 +90,10 @@ def run_case(case: Case, out_dir: str) -> dict:
     paths = trace(scene, case.tx, case.rx, opts)
     wp_time = time.perf_counter() - t0
     result = {"name": case.name, "scene": case.scene, "scene_file": xml, "note": case.note,
-              "tx": case.tx.tolist(), "num_rx": len(case.rx), "max_depth": case.max_depth,
+              "tx": case.tx.tolist(), "num_rx": len(case.rx), "rx": case.rx.tolist(), "max_depth": case.max_depth,
               "edge_diffraction": case.edge_diffraction, "frequency_hz": case.frequency_hz,
+              "samples_per_src": case.samples_per_src, "antennas": "isotropic, both ends, V then H",
+              "trace_options": opts.to_dict(),
               "wavepaths_paths": len(paths), "wavepaths_time_s": wp_time, "polarizations": {}}
     from ..em.antennas import Antenna
 
@@ -304,6 +306,13 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
     exact = summary["exact_comparison"]
     for name, line in summary.get("lines", {}).items():
         parts.append(f"<h3>{e(name)}</h3><img src='data:image/png;base64,{figures['line_' + name]}'>")
+        st = line.get("settings")
+        if st:
+            parts.append(f"<p class=small>{e(st['scene'])} ({e(st['material'])}), {st['frequency_hz'] / 1e9:g} GHz; "
+                         f"receivers every {st['phi_step_deg']:g} degrees on a circle of {st['rho_m']:g} m around the "
+                         f"edge; source at phi' = {st['phi_prime_deg']:g} degrees, {st['source_distance_m']:g} m away "
+                         f"({st['tx']}); kept: {e(st['kept'])}; {e(st['antennas'])}; Sionna max_depth "
+                         f"{st['sionna_max_depth']}, {st['sionna_samples_per_src']:,} samples.</p>")
         verdicts = exact["lines"].get(name, {})
         parts.append("<p>Matches the exact solution: " + "; ".join(
             f"{field}: <b>{e(v['matches_exact'])}</b>" for field, v in verdicts.items()) + "</p>")
@@ -320,6 +329,9 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
                      f"(<code>{e(str(cov['scene']))}</code>), transmitter {cov['tx']}, {cov['cell_m']} m cells at "
                      f"z = {cov['center'][2]} m, depth {cov['max_depth']}. Statistics over cells outside buildings "
                      f"where both maps exceed {cov['noise_floor_db']} dB.</p>")
+        if "frequency_hz" in cov:
+            parts.append(f"<p class=small>{cov['frequency_hz'] / 1e9:g} GHz; area {cov['size']} m around {cov['center']}; "
+                         f"{e(cov['antennas'])}; Sionna {cov['samples_per_tx']:,} samples; {e(cov['field_model'])}.</p>")
         parts.append(f"<img src='data:image/png;base64,{figures['coverage']}'>")
         parts.append("<table><tr><th>run</th><th>cells compared</th><th>median diff [dB]</th><th>mean [dB]</th>"
                      "<th>std [dB]</th><th>95% |diff| [dB]</th><th>cells only wavepaths reaches</th>"
@@ -337,8 +349,14 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
                            for k in summary["known_disagreements"]) + "</table>")
     parts.append("<h2>Cases</h2>")
     for c in summary["cases"]:
-        parts.append(f"<h3>{e(c['name'])}</h3><p class=small>{e(c['note'])}. Scene file <code>{e(c['scene_file'])}</code>; "
-                     f"{c['num_rx']} receivers; depth {c['max_depth']}; edge diffraction in Sionna: {c['edge_diffraction']}.</p>")
+        settings = (f"; {c['frequency_hz'] / 1e9:g} GHz; transmitter(s) {c['tx']}; {c['antennas']} antennas; Sionna "
+                    f"{c['samples_per_src']:,} samples per source" if "samples_per_src" in c else "")
+        origin = ("Sionna RT's own scene" if str(c["scene"]).startswith("sionna:")
+                  else "written in the report's folder, <code>scenes/</code>")
+        parts.append(f"<h3>{e(c['name'])}</h3><p class=small>{e(c['note'])}. Scene file <code>{e(c['scene_file'])}</code> "
+                     f"({origin}); "
+                     f"{c['num_rx']} receivers (positions: <code>validation.json</code>, <code>cases[].rx</code>); "
+                     f"depth {c['max_depth']}; edge diffraction in Sionna: {c['edge_diffraction']}{e(settings)}.</p>")
         if "gain_" + c["name"] in figures:
             parts.append(f"<img src='data:image/png;base64,{figures['gain_' + c['name']]}'>")
         for pol, r in c["polarizations"].items():
