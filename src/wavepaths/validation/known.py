@@ -43,8 +43,9 @@ KNOWN_DISAGREEMENTS = [
                   "face with phi' < pi and so reproduces Sionna only where one face is lit. On this line, though, "
                   "Sionna's samples from the source 10 km away barely reach the wedge's faces: it kept none of the "
                   "133 diffracted paths and 40 of the 45 reflections in the twenty-ninth session's runs (each run's "
-                  "counts are under the line; with the source 100 m away it finds them all), so most of its error here is missing paths, plus the phase floor "
-                  "of its float32 delays; the face choice is not isolated by this line.",
+                  "counts are under the line; with the source 100 m away it finds them all), so most of its error "
+                  "here is missing paths, plus the phase floor of its float32 delays; the face choice is not "
+                  "isolated by this line.",
         "who_matches_exact": "wavepaths (UTD)",
     },
     {

@@ -31,6 +31,7 @@ from ..scene import load_scene, write_mitsuba_xml
 from ..search import TraceOptions, trace
 
 S_PRIME = 10_000.0  # plane-wave approximation: curvature error k rho^2 / 2 s' ~ 4e-3
+LINE_SAMPLES = 1_000_000  # Sionna's samples per source on the lines
 SPEED_OF_LIGHT = 299_792_458.0
 
 
@@ -142,7 +143,8 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             from .sionna_runner import run_sionna_paths
 
             sn = run_sionna_paths(xml, tx, rx, frequency_hz=frequency_hz, max_depth=1, diffraction=True,
-                                  edge_diffraction=True, tx_antenna=("iso", pol), rx_antenna=("iso", pol))
+                                  edge_diffraction=True, samples_per_src=LINE_SAMPLES, tx_antenna=("iso", pol),
+                                  rx_antenna=("iso", pol))
             depth = sn.num_interactions
             keep = _keep_edge(sn.vertices, depth, sn.interactions, on_edge)
             v = sn.vertices[keep]
@@ -175,9 +177,10 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
                   "0-face reflection boundary": 180.0 - phi_p_deg,
                   "n-face reflection boundary": (2 * n - 1) * 180 - phi_p_deg}
     bounds = {k: v for k, v in candidates.items() if 0 < v < n * 180}
-    settings = {"scene": scene_name, "material": "PEC", "frequency_hz": frequency_hz, "rho_m": rho,
+    settings = {"scene": scene_name, "material": ", ".join(sorted({m.name for m in scene.materials})),
+                "frequency_hz": frequency_hz, "rho_m": rho,
                 "source_distance_m": S_PRIME, "phi_prime_deg": phi_p_deg, "phi_step_deg": 2.0,
-                "tx": tx[0].tolist(), "sionna_max_depth": 1, "sionna_samples_per_src": 1_000_000,
+                "tx": tx[0].tolist(), "sionna_max_depth": 1, "sionna_samples_per_src": LINE_SAMPLES,
                 "kept": "line of sight, one reflection and the diffraction by the edge on the x axis",
                 "antennas": "isotropic, both ends: H gives the soft field, V the hard one"}
     return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds, counts, delay_phase, settings)
