@@ -406,10 +406,11 @@ def coverage(
     timings: dict[str, float] = {}
     t = time.perf_counter()
     grid_key = hashlib.sha1(flat.tobytes()).hexdigest()
-    # the faces cell centres lie on, and whether on a solid's surface (cached per grid)
-    faces, on_solid = _cached(scene, "onface:" + grid_key, lambda: cells_on_faces(scene, flat))
+    # the faces cell centres lie on, and whether on a solid's surface (cached per grid), with the
+    # solids of the inside mask below (found once)
+    solids = _cached(scene, "solids", lambda: solid_objects(scene)) if cov.mask_inside else None
+    faces, on_solid = _cached(scene, "onface:" + grid_key, lambda: cells_on_faces(scene, flat, solids))
     if cov.mask_inside:
-        solids = _cached(scene, "solids", lambda: solid_objects(scene))
         inside = _cached(scene, "inside:" + grid_key, lambda: inside_solid_objects(scene, flat, solids))
         # a centre on a solid's surface is masked like those inside it, whatever the ray-parity
         # test (either answer on a surface) says: a rule, not a coin flip
