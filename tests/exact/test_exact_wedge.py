@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavepaths.exact import halfplane_plane_wave, utd_wedge_total_field, wedge_plane_wave
+from wavepaths.exact import halfplane_plane_wave, utd_wedge_total_field, wedge_geometrical_optics, wedge_plane_wave
 from wavepaths.errors import WavepathsError
 
 pytestmark = pytest.mark.exact
@@ -90,6 +90,35 @@ def test_utd_against_series(n: float, pp: float) -> None:
     # The error falls with k rho (about (k rho)^-1.2).
     assert errors[0] > errors[1] > errors[2] > errors[3]
     assert errors[3] < errors[1] / 10
+
+
+def test_exact_minus_geometrical_optics_is_the_edge_diffracted_field() -> None:
+    """The boundary lines judge each engine's diffracted paths against the series minus
+    :func:`wedge_geometrical_optics`. For n = 1 (a flat face) that difference is zero; on a wedge
+    it is Keller's diffracted field away from the boundaries, its error falling faster than the
+    field itself (1/k rho against 1/sqrt(k rho)), and half the incident field at a shadow or
+    reflection boundary. A reflection of the wrong sign or lit region would leave O(1) there."""
+    phi = np.linspace(0, np.pi, 181)
+    for pol in ("soft", "hard"):
+        d = wedge_plane_wave(40.0, phi, 0.5, 1.0, pol) - wedge_geometrical_optics(40.0, phi, 0.5, 1.0, pol)
+        assert np.max(np.abs(d[np.abs(phi - (np.pi - 0.5)) > 1e-9])) < 1e-10
+    for n in (7 / 6, 1.5, 2.0):
+        for pp in np.radians([16.0, 100.0]):
+            phi = np.linspace(0, n * np.pi, 721)
+            b = np.array([np.pi + pp, np.pi - pp, (2 * n - 1) * np.pi - pp])
+            far = np.all(np.abs(phi[:, None] - b[None, :]) > np.radians(15), axis=1)
+            for pol in ("soft", "hard"):
+                size, gtd_error = [], []
+                for k_rho in (50.0, 200.0):
+                    go = wedge_geometrical_optics(k_rho, phi, pp, n, pol)
+                    d = wedge_plane_wave(k_rho, phi, pp, n, pol) - go
+                    keller = utd_wedge_total_field(k_rho, phi, pp, n, pol, "gtd") - go
+                    size.append(np.max(np.abs(d[far])))
+                    gtd_error.append(np.max(np.abs(d - keller)[far]))
+                    assert 0.45 < np.max(np.abs(d)) < 0.75  # half the incident field next to a boundary
+                # measured: |d| 0.11-0.40, |d - Keller| 0.046-0.083 at k rho = 50 and 0.0074-0.013 at 200
+                assert size[0] < 0.45 and 1.6 < size[0] / size[1] < 2.4  # 1 / sqrt(k rho)
+                assert gtd_error[1] < 0.015 and gtd_error[0] / gtd_error[1] > 4.0
 
 
 @pytest.mark.parametrize("polarization", ["soft", "hard"])

@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from wavepaths.validation.lines import BoundaryLine
+from wavepaths.validation.lines import DIFFRACTED, BoundaryLine
 
 ENGINES = ("wavepaths UTD", "wavepaths GTD", "Sionna RT", "wavepaths compat=sionna")
 
@@ -43,10 +43,12 @@ def _line(name: str, off_db: dict) -> BoundaryLine:
         exact = (1.0 + 0.5 * np.cos(phi)) * np.exp(3j * phi + (0.3j if pol == "V" else 0))
         exact[5] *= 0.1 / abs(exact[5])
         curves[("exact", pol)] = exact
+        curves[("exact" + DIFFRACTED, pol)] = exact  # the diffracted fields carry the same offsets
         for engine in ENGINES:
             u = exact.copy()
             u[5] *= 10 ** (off_db.get((name, engine, pol), 0.0) / 20)
             curves[(engine, pol)] = u
+            curves[(engine + DIFFRACTED, pol)] = u
     return BoundaryLine(name, phi_deg, 60.0, 73.4, curves, {"shadow boundary": 240.0})
 
 
@@ -94,11 +96,12 @@ def _run(tmp_path, monkeypatch, off_db=None):
     off = {("half_plane", "Sionna RT", "V"): 36.0, ("half_plane", "Sionna RT", "H"): 8.0,
            ("wedge", "Sionna RT", "V"): 6.5, ("wedge", "Sionna RT", "H"): 26.0,
            ("half_plane", "wavepaths UTD", "H"): 0.33, ("wedge", "wavepaths UTD", "V"): -0.06,
-           ("half_plane", "wavepaths GTD", "H"): 15.0}
+           ("half_plane", "wavepaths GTD", "H"): 15.0,
+           ("wedge_awning", "Sionna RT", "V"): 30.0, ("wedge_awning", "Sionna RT", "H"): 30.0}
     off.update(off_db or {})
     made = {}
 
-    def boundary_line(name, out_dir):
+    def boundary_line(name, out_dir, samples):
         made[name] = _line(name, off)
         return made[name]
 
@@ -184,7 +187,7 @@ def test_report_figures_are_drawn_from_validation_json(default_run):
 
     _, text, page, _ = default_run
     figures = report_figures(_strict_loads(text))
-    assert set(figures) == {"gain_synthetic", "line_half_plane", "line_wedge", "coverage"}
+    assert set(figures) == {"gain_synthetic", "line_half_plane", "line_wedge", "line_wedge_awning", "coverage"}
     embedded = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)
     assert sorted(embedded) == sorted(figures.values())
 
@@ -211,7 +214,9 @@ def test_overall_verdict_fails_when_utd_misses_the_exact_solution(tmp_path, monk
 def test_who_matches_the_exact_solution_is_computed_from_the_errors(default_run, tmp_path, monkeypatch):
     # the measurement, not the text in known.py, decides: swap who is right on the half-plane (hard)
     summary, _, page, _ = _run(tmp_path, monkeypatch, {("half_plane", "Sionna RT", "V"): 0.0,
-                                                       ("half_plane", "wavepaths UTD", "V"): 3.0})
+                                                       ("half_plane", "wavepaths UTD", "V"): 3.0,
+                                                       ("wedge", "Sionna RT", "V"): 0.0,
+                                                       ("wedge", "wavepaths UTD", "V"): 3.0})
     row = re.search(r"<tr><td style='text-align:left'>Diffracted \|a\| for E perpendicular.*?</tr>", page).group(0)
     assert "<b>Sionna RT</b>" in row and "wavepaths (UTD)" not in row
     known = summary["exact_comparison"]["known_disagreements"]
@@ -222,7 +227,7 @@ def test_who_matches_the_exact_solution_is_computed_from_the_errors(default_run,
     known = summary["exact_comparison"]["known_disagreements"]
     assert known["hard-polarisation-coefficient"]["matches_exact"] == "wavepaths UTD"
     assert known["reflection-boundary-jump"]["matches_exact"] == "wavepaths UTD"
-    assert known["both-faces-lit-face-choice"]["matches_exact"] == "wavepaths UTD"
+    assert known["diffraction-between-objects"]["matches_exact"] == "wavepaths UTD"
     assert known["sampling-misses"]["matches_exact"] is None  # no exact solution in the report
     assert "not measured here; documented: wavepaths (complete)" in page
     assert summary["exact_comparison"]["lines"]["half_plane"]["hard"]["matches_exact"] == "wavepaths UTD"
@@ -245,6 +250,41 @@ def test_exact_comparison_holds_wavepaths_utd_only_and_is_strict():
     assert len(exact_comparison({"l": nan})["violations"]) == 2
     assert not exact_comparison({"l": {"errors": {}}})["passed"]
     assert not exact_comparison({})["passed"]
+
+
+def test_a_coefficient_is_judged_on_the_diffracted_field_alone():
+    """An engine that misses reflections is off the exact total field whatever its diffraction
+    coefficient; a known disagreement about a coefficient (``exact_measure: diffracted``) is
+    judged on the diffracted paths alone, and an engine with no diffracted path is no match."""
+    from wavepaths.validation.verdict import exact_comparison, known_disagreement_verdicts
+
+    ok = {"max_db": 0.01, "max_complex_error": 0.001}
+    none = {"max_db": None, "max_complex_error": None, "receivers": 0, "receivers_without": 9}
+    line = {"errors": {"wavepaths UTD (soft)": ok, "wavepaths UTD (hard)": ok,
+                       "Sionna RT (soft)": {"max_db": 30.0, "max_complex_error": 0.9},  # reflections missing
+                       "Sionna RT (hard)": {"max_db": 30.0, "max_complex_error": 0.9}},
+            "diffracted_errors": {"wavepaths UTD (soft)": {**ok, "receivers": 9, "receivers_without": 0},
+                                  "wavepaths UTD (hard)": {**ok, "receivers": 9, "receivers_without": 0},
+                                  "Sionna RT (soft)": {**ok, "receivers": 7, "receivers_without": 2},
+                                  "Sionna RT (hard)": none}}
+    exact = exact_comparison({"l": line})
+    assert exact["passed"]
+    assert exact["lines"]["l"]["soft"]["matches_exact"] == "wavepaths UTD"
+    assert exact["lines"]["l"]["soft"]["diffracted_matches_exact"] == "both"
+    assert exact["lines"]["l"]["hard"]["diffracted_matches_exact"] == "wavepaths UTD"
+    known = [{"id": "coef", "exact_lines": [("l", "soft")], "exact_measure": "diffracted"},
+             {"id": "total", "exact_lines": [("l", "soft")]},
+             {"id": "none", "exact_lines": [("l", "hard")], "exact_measure": "diffracted"}]
+    v = known_disagreement_verdicts(known, exact)
+    assert v["coef"]["matches_exact"] == "both" and v["coef"]["measure"] == "diffracted"
+    assert v["total"]["matches_exact"] == "wavepaths UTD" and v["total"]["measure"] == "total"
+    assert v["none"]["matches_exact"] == "wavepaths UTD" and "Sionna RT no diffracted path" in v["none"]["detail"]
+    # wavepaths' UTD is held on the diffracted field too
+    bad = {**line, "diffracted_errors": {**line["diffracted_errors"],
+                                         "wavepaths UTD (hard)": {"max_db": 2.0, "max_complex_error": 0.1,
+                                                                  "receivers": 9, "receivers_without": 0}}}
+    res = exact_comparison({"l": bad})
+    assert not res["passed"] and res["violations"] == [res["violations"][0]] and "diffracted field" in res["violations"][0]
 
 
 def test_a_path_whose_leg_crosses_a_face_exactly_at_its_edge_is_a_convention_not_a_failure():

@@ -10,6 +10,9 @@ name               what it is
 =================  ==========================================================================
 half_plane         a 100 m x 50 m metal screen in the plane y = 0, its top edge on the x axis
 wedge              a 90 degree metal wedge (exterior angle 270 degrees, n = 1.5), edge on x
+wedge_awning       the wedge with a metal awning, another object, hinged on its edge 210 degrees
+                   from its 0-face: three faces of two objects on one edge, whose sectors are
+                   wedges of n = 7/6 and n = 1/3 (the exact arbiter of ``three_face_edge``)
 box_on_ground      a 10 m concrete cube standing on a 60 m ground plane (its foot must not diffract)
 slit_shutter       a concrete wall with a window closed by tilted wooden slats, a wall behind it
                    (the seed's figures 8-9 made radio)
@@ -119,6 +122,17 @@ def _wedge(b: SceneBuilder) -> None:
     b.add_quad("wedge", PEC, [[-50, 0, 0], [-50, 0, -50], [50, 0, -50], [50, 0, 0]])
 
 
+AWNING_DEG = 210.0  # the awning's angle from the wedge's 0-face (the half-plane y = 0, z < 0)
+
+
+def _wedge_awning(b: SceneBuilder) -> None:
+    # the awning points along (0, sin a, -cos a) from the edge, as the boundary lines measure phi
+    _wedge(b)
+    a = np.deg2rad(AWNING_DEG)
+    y, z = 50 * np.sin(a), -50 * np.cos(a)
+    b.add_quad("awning", PEC, [[-50, 0, 0], [50, 0, 0], [50, y, z], [-50, y, z]])
+
+
 def _box_on_ground(b: SceneBuilder) -> None:
     b.add_quad("ground", itu_material("medium_dry_ground"), [[-30, -30, 0], [30, -30, 0], [30, 30, 0], [-30, 30, 0]])
     b.add_box("box", itu_material("concrete", thickness_m=0.3), (-5, -5, 0), (5, 5, 10))
@@ -160,6 +174,7 @@ def _touching_blocks(b: SceneBuilder) -> None:
 BUILTIN_SCENES = {
     "half_plane": _half_plane,
     "wedge": _wedge,
+    "wedge_awning": _wedge_awning,
     "box_on_ground": _box_on_ground,
     "slit_shutter": _slit_shutter,
     "street_canyon": _street_canyon,

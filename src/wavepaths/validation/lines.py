@@ -25,14 +25,23 @@ import numpy as np
 from ..em.antennas import Antenna
 from ..em.polarization import spherical_unit_vectors
 from ..exact.halfplane import halfplane_plane_wave
-from ..exact.wedge import wedge_plane_wave
+from ..exact.wedge import wedge_geometrical_optics, wedge_plane_wave
 from ..fields import FieldConfig, compute_fields
 from ..scene import load_scene, write_mitsuba_xml
+from ..scene.builtin import AWNING_DEG
 from ..search import TraceOptions, trace
 
 S_PRIME = 10_000.0  # plane-wave approximation: curvature error k rho^2 / 2 s' ~ 4e-3
 LINE_SAMPLES = 1_000_000  # Sionna's samples per source on the lines
+# the full report's: from 10 km Sionna's samples barely reach the wedges' faces; with 1e6 it keeps
+# none of the wedge line's 133 diffracted paths, with 1e7 all of them (about 80 s per polarisation)
+LINE_SAMPLES_FULL = {"half_plane": 1_000_000, "wedge": 10_000_000, "wedge_awning": 10_000_000}
+# the lines of the report, each with an exact solution
+LINES = ("half_plane", "wedge", "wedge_awning")
 SPEED_OF_LIGHT = 299_792_458.0
+# suffix of a curve label for the field of an engine's diffracted paths alone, and of the exact
+# solution minus its geometrical optics (:func:`~wavepaths.exact.wedge.wedge_geometrical_optics`)
+DIFFRACTED = " diffracted"
 
 
 @dataclass
@@ -76,6 +85,11 @@ def _mechanism_counts(depth: np.ndarray, interactions: np.ndarray) -> dict:
             "D": int(((depth > 0) & (first == 2)).sum())}
 
 
+def _diffracted(depth: np.ndarray, interactions: np.ndarray) -> np.ndarray:
+    """(N,) bool: the kept paths that are one diffraction by the edge (the line keeps no other)."""
+    return (depth == 1) & (interactions[:, 0] == 2)
+
+
 def _polyline_lengths(v: np.ndarray, depth: np.ndarray) -> np.ndarray:
     """(N,) float64 length of each path's polyline ``v`` (N, D + 2, 3), its ``depth + 1`` segments."""
     seg = np.linalg.norm(np.diff(v, axis=1), axis=2)
@@ -90,6 +104,10 @@ def _geometry(scene_name: str):
         return to_xyz, 2.0, 60.0
     # wavepaths' wedge: 0-face along -z, n-face along -y, exterior from -z through +y, +z to -y
     to_xyz = lambda phi: np.stack([np.zeros_like(phi), np.sin(phi), -np.cos(phi)], axis=-1)
+    if scene_name == "wedge_awning":
+        # the sector from the 0-face to the awning (another object on the same edge), n = 7/6; the
+        # source lights both, as three_face_edge's transmitter lights the roof and the awning
+        return to_xyz, AWNING_DEG / 180.0, 60.0
     return to_xyz, 1.5, 100.0
 
 
@@ -105,8 +123,14 @@ def _keep_edge(vertices, depth, interactions, edge_is_diff):
 
 
 def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rho: float = 1.0,
-                  with_sionna: bool = True) -> BoundaryLine:
-    """Compute the normalised total field along the circle for every engine available."""
+                  with_sionna: bool = True, samples: int = LINE_SAMPLES) -> BoundaryLine:
+    """Compute the normalised total field along the circle for every engine available.
+
+    ``scene_name`` is one of :data:`LINES`; ``samples`` is Sionna's number of samples per source.
+    Besides each engine's total field, the curves hold the field of its diffracted paths alone
+    (label + :data:`DIFFRACTED`) and the exact solution minus its geometrical optics
+    (:func:`diffracted_errors`).
+    """
     import os
 
     scene = load_scene(scene_name)
@@ -135,6 +159,9 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             r = compute_fields(scene, p, cfg)
             curves[(label, pol)] = _u((p.departure_directions, p.arrival_directions), None, r.a, p.lengths,
                                       p.rx_index, len(rx), k, pol, S_PRIME)
+            d = _diffracted(p.depth, p.interactions)
+            curves[(label + DIFFRACTED, pol)] = _u((p.departure_directions[d], p.arrival_directions[d]), None,
+                                                   r.a[d], p.lengths[d], p.rx_index[d], len(rx), k, pol, S_PRIME)
             if label == "wavepaths UTD":  # the same UTD with its delays rounded as Sionna's are (float32)
                 rounded = np.float32(p.lengths / SPEED_OF_LIGHT).astype(np.float64) * SPEED_OF_LIGHT
                 float32_delays[pol] = _u((p.departure_directions, p.arrival_directions), None, r.a, rounded,
@@ -143,7 +170,7 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             from .sionna_runner import run_sionna_paths
 
             sn = run_sionna_paths(xml, tx, rx, frequency_hz=frequency_hz, max_depth=1, diffraction=True,
-                                  edge_diffraction=True, samples_per_src=LINE_SAMPLES, tx_antenna=("iso", pol),
+                                  edge_diffraction=True, samples_per_src=samples, tx_antenna=("iso", pol),
                                   rx_antenna=("iso", pol))
             depth = sn.num_interactions
             keep = _keep_edge(sn.vertices, depth, sn.interactions, on_edge)
@@ -156,6 +183,10 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             arr /= np.linalg.norm(arr, axis=1, keepdims=True)
             curves[("Sionna RT", pol)] = _u((dep, arr), None, sn.a[keep], sn.tau[keep] * SPEED_OF_LIGHT,
                                             sn.rx_index[keep], len(rx), k, pol, S_PRIME)
+            dd = _diffracted(d, sn.interactions[keep])
+            curves[("Sionna RT" + DIFFRACTED, pol)] = _u((dep[dd], arr[dd]), None, sn.a[keep][dd],
+                                                         sn.tau[keep][dd] * SPEED_OF_LIGHT, sn.rx_index[keep][dd],
+                                                         len(rx), k, pol, S_PRIME)
             counts.setdefault("Sionna RT", {})[FIELD_OF_POLARIZATION[pol]] = _mechanism_counts(
                 d, sn.interactions[keep])
             err = k * (sn.tau[keep] * SPEED_OF_LIGHT - _polyline_lengths(v, d))
@@ -169,6 +200,8 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
         else:
             curves[("exact", pol)] = wedge_plane_wave(k * rho, phi, np.deg2rad(phi_p_deg), n, soft_hard)
         ref = curves[("exact", pol)]
+        curves[("exact" + DIFFRACTED, pol)] = ref - wedge_geometrical_optics(k * rho, phi, np.deg2rad(phi_p_deg), n,
+                                                                            soft_hard)
         u32 = float32_delays[pol]
         d32 = 20 * np.log10(np.maximum(np.abs(u32), 1e-12) / np.maximum(np.abs(ref), 1e-12))
         delay_phase.setdefault(soft_hard, {})["utd_with_these_delays"] = {
@@ -176,11 +209,11 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
     candidates = {"shadow boundary": phi_p_deg + 180.0 if phi_p_deg < 180 else phi_p_deg - 180.0,
                   "0-face reflection boundary": 180.0 - phi_p_deg,
                   "n-face reflection boundary": (2 * n - 1) * 180 - phi_p_deg}
-    bounds = {k: v for k, v in candidates.items() if 0 < v < n * 180}
+    bounds = {k: round(v, 9) for k, v in candidates.items() if 0 < v < n * 180}
     settings = {"scene": scene_name, "material": ", ".join(sorted({m.name for m in scene.materials})),
                 "frequency_hz": frequency_hz, "rho_m": rho,
                 "source_distance_m": S_PRIME, "phi_prime_deg": phi_p_deg, "phi_step_deg": 2.0,
-                "tx": tx[0].tolist(), "sionna_max_depth": 1, "sionna_samples_per_src": LINE_SAMPLES,
+                "tx": tx[0].tolist(), "sionna_max_depth": 1, "sionna_samples_per_src": samples,
                 "kept": "line of sight, one reflection and the diffraction by the edge on the x axis",
                 "antennas": "isotropic, both ends: H gives the soft field, V the hard one"}
     return BoundaryLine(scene_name, phi_deg, phi_p_deg, k * rho, curves, bounds, counts, delay_phase, settings)
@@ -199,7 +232,7 @@ def line_errors(line: BoundaryLine) -> dict:
     """Largest and median |u| difference in dB from the exact solution, per engine and polarisation."""
     out = {}
     for (label, pol), u in line.curves.items():
-        if label == "exact":
+        if label == "exact" or label.endswith(DIFFRACTED):
             continue
         ref = line.curves[("exact", pol)]
         d = 20 * np.log10(np.maximum(np.abs(u), 1e-12) / np.maximum(np.abs(ref), 1e-12))
@@ -211,6 +244,42 @@ def line_errors(line: BoundaryLine) -> dict:
     return out
 
 
+def diffracted_errors(line: BoundaryLine) -> dict:
+    """Each engine's diffracted paths alone against the exact solution minus its geometrical optics.
+
+    The total field mixes every mechanism: an engine that misses reflections, or whose delays
+    carry a phase floor, is off the exact solution whatever its diffraction coefficient. The
+    exact diffracted field ``u_d = u_exact - u_GO`` (:func:`~wavepaths.exact.wedge.wedge_geometrical_optics`;
+    discontinuous on the shadow and reflection boundaries, which no receiver touches) is
+    compared with the sum of the engine's diffracted paths, at the receivers where it has one
+    (``receivers``; ``receivers_without`` are left out, a missing path being a search matter).
+
+    Returns
+    -------
+    dict
+        :func:`curve_key` of the engine's label -> ``{"max_db", "median_db"}`` (|u_d| ratio in dB
+        where ``|u_d| > 0.05``, or over all its receivers if none is), ``"max_complex_error"``
+        (``|u_d - u_d,exact|``, incident field at the edge = 1), ``"receivers"``,
+        ``"receivers_without"``; the errors are ``None`` when the engine has no diffracted path.
+    """
+    out = {}
+    for (label, pol), u in line.curves.items():
+        if not label.endswith(DIFFRACTED) or label == "exact" + DIFFRACTED:
+            continue
+        ref = line.curves[("exact" + DIFFRACTED, pol)]
+        has = u != 0
+        entry = {"receivers": int(has.sum()), "receivers_without": int((~has).sum()),
+                 "max_db": None, "median_db": None, "max_complex_error": None}
+        if has.any():
+            d = np.abs(20 * np.log10(np.abs(u[has]) / np.maximum(np.abs(ref[has]), 1e-12)))
+            strong = np.abs(ref[has]) > 0.05
+            d = d[strong] if strong.any() else d
+            entry.update(max_db=float(d.max()), median_db=float(np.median(d)),
+                         max_complex_error=float(np.max(np.abs(u[has] - ref[has]))))
+        out[curve_key(label[:-len(DIFFRACTED)], pol)] = entry
+    return out
+
+
 def line_summary(line: BoundaryLine) -> dict:
     """The JSON entry of one line: its errors (:func:`line_errors`) and everything its figure needs.
 
@@ -218,7 +287,7 @@ def line_summary(line: BoundaryLine) -> dict:
     complex ``u`` along the circle as two lists, ``{"re": (k,), "im": (k,)}``, one value per
     ``phi_deg``; :func:`curves_from_summary` reads them back.
     """
-    return {"errors": line_errors(line), "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
+    return {"errors": line_errors(line), "diffracted_errors": diffracted_errors(line), "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
             "boundaries_deg": {k: float(v) for k, v in line.boundaries_deg.items()}, "k_rho": float(line.k_rho),
             "path_counts": line.path_counts, "sionna_delay_phase_rad": line.sionna_delay_phase,
             "settings": line.settings,
