@@ -76,16 +76,22 @@ def _coverage() -> dict:
     diff = np.full(wp.shape, np.nan)
     diff[both] = wp[both] - sn[both]
     d = diff[np.isfinite(diff)]
+    like = {"std_db": 0.5, "median_db": 0.01, "cells": 3, "tolerances": {"std_db": 1.5, "abs_median_db": 0.5},
+            "passed": True, "difference_db": diff / 4}
+    decomposition = {"sionna_seed_noise_db": 0.9, "wavepaths_cell_averaged_time_s": 0.1,
+                     "rows": [{"wavepaths": "wavepaths at the cell centres", "sionna": "Sionna, 1,000,000 samples",
+                               "std_db": float(d.std()), "median_db": float(np.median(d)), "cells": int(d.size)}]}
     run = {"wavepaths_db": wp, "sionna_db": sn, "difference_db": diff, "cell_centres_agree": True,
            "cells_compared": int(d.size), "cells": 6, "cells_only_wavepaths": 1, "mean_db": float(d.mean()),
            "median_db": float(np.median(d)), "std_db": float(d.std()), "p95_abs_db": float(np.max(np.abs(d))),
-           "wavepaths_time_s": 0.1, "sionna_time_s": 0.1, "sionna_warmup_s": 0.0}
+           "wavepaths_time_s": 0.1, "sionna_time_s": 0.1, "sionna_warmup_s": 0.0, "cells_sionna_inside_objects": 1,
+           "decomposition": decomposition, "like_for_like": like}
     return {"scene": "synthetic.xml", "tx": [-4.0, 0.0, 10.0], "center": [0.0, 0.0, 1.5], "size": [12.0, 8.0],
             "cell_m": 4.0, "max_depth": 2, "noise_floor_db": -160.0,
             "runs": {"no_diffraction": run, "diffraction": {**run, "wavepaths_db": wp + 1.0}}}
 
 
-def _run(tmp_path, monkeypatch, off_db=None):
+def _run(tmp_path, monkeypatch, off_db=None, coverage=None):
     """``run_validation`` on the synthetic engines; return (summary, JSON text, HTML text, lines)."""
     import wavepaths.validation.coverage_compare as coverage_compare
     import wavepaths.validation.lines as lines_mod
@@ -109,7 +115,7 @@ def _run(tmp_path, monkeypatch, off_db=None):
     monkeypatch.setattr(report, "run_case", lambda case, out_dir: _case())
     monkeypatch.setattr(report, "_versions", lambda: {"wavepaths": "test"})
     monkeypatch.setattr(lines_mod, "boundary_line", boundary_line)
-    monkeypatch.setattr(coverage_compare, "compare_coverage", lambda *args, **kwargs: _coverage())
+    monkeypatch.setattr(coverage_compare, "compare_coverage", lambda *args, **kwargs: coverage or _coverage())
     monkeypatch.setattr(sionna_runner, "builtin_scene_path", lambda name: f"{name}.xml")
     summary = report.run_validation(str(tmp_path), quick=True)
     return (summary, (tmp_path / "validation.json").read_text(), (tmp_path / "report.html").read_text(), made)
@@ -209,6 +215,26 @@ def test_overall_verdict_fails_when_utd_misses_the_exact_solution(tmp_path, monk
     assert summary["cases_passed"]
     assert [v for v in summary["exact_comparison"]["violations"] if v.startswith("wedge soft")]
     assert "Overall: <b>FAIL</b>" in page
+
+
+def test_the_coverage_maps_are_judged_like_for_like(default_run, tmp_path, monkeypatch):
+    """The overall verdict includes the coverage maps compared like for like; a run without that
+    verdict is not a silent pass. The report says what the difference is made of."""
+    from wavepaths.validation.report import coverage_verdict
+
+    summary, _, page, _ = default_run
+    assert summary["coverage_passed"] and "coverage maps like for like: pass" in page
+    assert "What the difference is made of" in page and "seed-to-seed noise 0.9 dB" in page
+    failing = _coverage()
+    failing["runs"]["diffraction"]["like_for_like"] = {**failing["runs"]["diffraction"]["like_for_like"],
+                                                       "std_db": 4.2, "passed": False}
+    summary, _, page, _ = _run(tmp_path, monkeypatch, coverage=failing)
+    assert summary["cases_passed"] and summary["exact_comparison"]["passed"]
+    assert not summary["coverage_passed"] and not summary["passed"]
+    assert "coverage maps like for like: FAIL" in page and "Overall: <b>FAIL</b>" in page
+    without = _coverage()
+    del without["runs"]["diffraction"]["like_for_like"]
+    assert not coverage_verdict(without) and not coverage_verdict({"runs": {}}) and not coverage_verdict(None)
 
 
 def test_who_matches_the_exact_solution_is_computed_from_the_errors(default_run, tmp_path, monkeypatch):

@@ -85,7 +85,7 @@ def test_the_exact_solutions_decide_who_matches(quick_report):
     _, summary = quick_report
     exact = summary["exact_comparison"]
     assert exact["passed"], exact["violations"]
-    assert summary["passed"] == (summary["cases_passed"] and exact["passed"])
+    assert summary["passed"] == (summary["cases_passed"] and exact["passed"] and summary["coverage_passed"])
     known = exact["known_disagreements"]
     for k in ("hard-polarisation-coefficient", "reflection-boundary-jump", "diffraction-between-objects"):
         assert known[k]["matches_exact"] == "wavepaths UTD", (k, known[k])
@@ -233,6 +233,30 @@ def test_coverage_maps_of_both_engines_agree_on_the_street_canyon(quick_report):
     with_diff = cov["runs"]["diffraction"]
     assert with_diff["cells_compared"] >= no_diff["cells_compared"]  # diffraction lights the shadowed cells
     assert abs(with_diff["median_db"]) < 1.0
+
+
+def test_the_coverage_difference_is_explained_and_vanishes_like_for_like(quick_report):
+    """The 2-4 dB spread of the two engines' maps is made of Sionna's sampling noise, cell
+    averaging and two model differences (its radio map's paths, its coefficient). Measured at 4 m
+    cells: without diffraction cell averaging takes the std from 2.09 to 0.12 dB; with it the
+    like-for-like maps agree to 0.56 dB against Sionna at 10x samples (from 4.18)."""
+    _, summary = quick_report
+    assert summary["coverage_passed"]
+    for name, run in summary["coverage"]["runs"].items():
+        like, rows = run["like_for_like"], run["decomposition"]["rows"]
+        assert like["passed"] and like["cells"] == run["cells_compared"], name
+        baseline = rows[0]
+        assert baseline["std_db"] == pytest.approx(run["std_db"]) and baseline["cells"] == run["cells_compared"]
+        assert like["std_db"] < baseline["std_db"] / 3, (name, like, baseline)
+    noise = summary["coverage"]["runs"]["no_diffraction"]["decomposition"]["sionna_seed_noise_db"]
+    assert noise < 0.01  # a fixed lattice of rays: the seed changes nothing without diffraction
+    noise = summary["coverage"]["runs"]["diffraction"]["decomposition"]["sionna_seed_noise_db"]
+    assert 0.3 < noise < 3.0  # a few diffracted samples per cell
+    # each model difference alone leaves most of the spread (2.2 dB and 4.3 dB measured)
+    rows = {r["wavepaths"]: r for r in summary["coverage"]["runs"]["diffraction"]["decomposition"]["rows"]}
+    alone = [r for w, r in rows.items() if "compat='sionna', with reflections" in w or "textbook UTD, no reflection" in w]
+    assert len(alone) == 2 and all(r["std_db"] > 2 * summary["coverage"]["runs"]["diffraction"]["like_for_like"]["std_db"]
+                                   for r in alone)
 
 
 @pytest.mark.xfail(strict=True, reason="known disagreement 'sionna-los-skips-last-segment-fraction' "

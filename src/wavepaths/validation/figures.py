@@ -57,6 +57,9 @@ def line_figure(name: str, entry: dict) -> str:
         for bname, b in entry["boundaries_deg"].items():
             ax.axvline(b, color="0.6", lw=0.8)
             ax.text(b, 7.5, bname.replace(" boundary", "\nboundary"), fontsize=7, ha="center", va="top")
+        pp = entry["phi_prime_deg"]  # the source's direction
+        ax.axvline(pp, color="tab:green", lw=0.8, ls=":")
+        ax.text(pp, -29.0, "source phi'", fontsize=7, ha="center", va="bottom", color="tab:green")
         ax.set_title(f"{name}: {'soft (E along the edge)' if pol == 'H' else 'hard (H along the edge)'}, "
                      f"k rho = {entry['k_rho']:.0f}")
         ax.set_xlabel("observer angle phi from the 0-face [deg]")

@@ -16,9 +16,15 @@ Tolerances held (Sionna computes in float32, wavepaths in float64):
 * against the exact solutions (the arbiter; Sionna RT is a peer): wavepaths' UTD within
   0.5 dB in |u| and 0.02 in complex u on every boundary line and polarisation
   (:mod:`wavepaths.validation.verdict`, which also says which engine matches where the two
-  disagree).
+  disagree);
+* coverage maps like for like (the same paths, Sionna's diffraction coefficient, wavepaths
+  averaged over each cell, Sionna with 10x its samples): the difference's std within 1.5 dB
+  and its median within 0.5 dB, with and without diffraction
+  (:mod:`wavepaths.validation.coverage_compare`, which also measures what the difference of
+  the two engines' own maps is made of).
 
-The report passes when every case and the exact-solution comparison pass.
+The report passes when every case, the exact-solution comparison and the like-for-like
+coverage comparison pass.
 
 ``validation.json`` is strict JSON: a non-finite number (-inf dB where no path reaches a
 receiver, NaN where a coverage cell is not compared) is written ``null``
@@ -260,12 +266,48 @@ def _line_diffracted_html(name: str, line: dict, exact: dict) -> str:
             + "</table>")
 
 
+def _coverage_decomposition_html(cov: dict) -> str:
+    """What the difference of the two engines' maps is made of, and the like-for-like verdict
+    (``coverage_compare._decomposition``); empty for a summary without them."""
+    runs = {k: r for k, r in cov["runs"].items() if "decomposition" in r}
+    if not runs:
+        return ""
+    e = html.escape
+    parts = ["<h3>What the difference is made of</h3><p>Four things separate the two maps, each measured here: "
+             "Sionna's sampling noise (two of its maps with different seeds; without diffraction its rays leave on a "
+             "fixed lattice and the seed changes nothing); cell averaging (Sionna averages the power over the cell, a "
+             "part inside a building counting as zero, wavepaths samples the centre); the path set (Sionna's radio map "
+             "diffracts only from the transmitter to an edge to the cell, with no reflection before or after); and "
+             "the diffraction coefficient (Sionna's combination, which the boundary lines above judge against the "
+             "exact solutions). Like for like, with the last two matched and wavepaths averaged over each cell, the "
+             "maps must agree with Sionna at ten times its samples within "
+             f"{runs[next(iter(runs))]['like_for_like']['tolerances']['std_db']} dB std and "
+             f"{runs[next(iter(runs))]['like_for_like']['tolerances']['abs_median_db']} dB median.</p>"]
+    for name, r in runs.items():
+        d, like = r["decomposition"], r["like_for_like"]
+        verdict = "pass" if like["passed"] else "FAIL"
+        parts.append(f"<p><b>{e(name.replace('_', ' '))}</b>: Sionna's seed-to-seed noise "
+                     f"{_fmt(d['sionna_seed_noise_db'])} dB rms; like for like: std {_fmt(like['std_db'])} dB, median "
+                     f"{_fmt(like['median_db'])} dB over {like['cells']} cells: <b>{verdict}</b>; "
+                     f"{r.get('cells_sionna_inside_objects', 0)} cells whose centre lies inside a building have a "
+                     "Sionna value and none from wavepaths (not compared).</p>")
+        parts.append("<table><tr><th>wavepaths map</th><th>Sionna map</th><th>std of the difference [dB]</th>"
+                     "<th>median [dB]</th><th>cells</th></tr>" + "".join(
+                         f"<tr><td style='text-align:left'>{e(row['wavepaths'])}</td><td style='text-align:left'>"
+                         f"{e(row['sionna'])}</td><td>{_fmt(row['std_db'])}</td><td>{_fmt(row['median_db'])}</td>"
+                         f"<td>{row['cells']}</td></tr>" for row in d["rows"]) + "</table>")
+    return "".join(parts)
+
+
 def _verdict_text(summary: dict) -> str:
     exact = summary["exact_comparison"]
     cases = "pass" if summary["cases_passed"] else "FAIL"
     held = "pass" if exact["passed"] else "FAIL: " + "; ".join(exact["violations"][:3])
-    return (f"path-by-path comparison with Sionna RT: {cases}; {HELD_ENGINE} against the exact solutions: "
+    text = (f"path-by-path comparison with Sionna RT: {cases}; {HELD_ENGINE} against the exact solutions: "
             f"{html.escape(held)}")
+    if "coverage_passed" in summary:
+        text += f"; coverage maps like for like: {'pass' if summary['coverage_passed'] else 'FAIL'}"
+    return text
 
 
 def _within_text(exact: dict, line: str, key: str) -> str:
@@ -371,6 +413,7 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
                          f"<td>{_fmt(r['mean_db'])}</td><td>{_fmt(r['std_db'])}</td><td>{_fmt(r['p95_abs_db'])}</td>"
                          f"<td>{r['cells_only_wavepaths']}</td><td>{_fmt(r['wavepaths_time_s'])}</td>"
                          f"<td>{_fmt(r['sionna_time_s'])}</td></tr>" for k, r in cov["runs"].items()) + "</table>")
+        parts.append(_coverage_decomposition_html(cov))
     parts.append("<h2>Known disagreements</h2><p>Which engine matches the exact solution is computed from the "
                  "boundary lines' errors above (within the tolerances on every line the disagreement shows on); "
                  "where no line of this report measures it, the documented answer is given with the test that "
@@ -423,6 +466,13 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
         f.write("\n".join(parts))
 
 
+def coverage_verdict(coverage_summary: dict | None) -> bool:
+    """Whether every coverage run agrees like for like (``runs.<run>.like_for_like.passed``); a run
+    without that verdict, or no run, is not a pass."""
+    runs = (coverage_summary or {}).get("runs", {})
+    return bool(runs) and all(r.get("like_for_like", {}).get("passed", False) for r in runs.values())
+
+
 def write_report(json_path: str, html_path: str) -> dict:
     """Write ``report.html`` from ``validation.json`` alone (figures included); return the summary read."""
     with open(json_path) as f:
@@ -463,6 +513,7 @@ def run_validation(out_dir: str, quick: bool = False, progress=None) -> dict:
     exact = exact_comparison(lines, EXACT_TOLERANCES)
     exact["known_disagreements"] = known_disagreement_verdicts(KNOWN_DISAGREEMENTS, exact)
     cases_passed = all(r["passed"] for r in results)
+    coverage_passed = coverage_verdict(coverage_summary)
     summary = {
         "generated": time.strftime("%Y-%m-%d %H:%M:%S"),
         "quick": quick,
@@ -474,7 +525,8 @@ def run_validation(out_dir: str, quick: bool = False, progress=None) -> dict:
         "known_disagreements": KNOWN_DISAGREEMENTS,
         "exact_comparison": exact,
         "cases_passed": cases_passed,
-        "passed": cases_passed and exact["passed"],
+        "coverage_passed": coverage_passed,
+        "passed": cases_passed and exact["passed"] and coverage_passed,
     }
     json_path = os.path.join(out_dir, "validation.json")
     write_json(summary, json_path)
