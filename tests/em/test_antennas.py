@@ -355,3 +355,21 @@ def test_compiled_field_vectors_equal_the_numpy_reference():
     for bad, match in (([[0.0, 0.0, 0.0]], "non-zero"), ([[np.nan, 0.0, 1.0]], "finite"), (np.zeros((2, 2)), "shape")):
         with pytest.raises(WavepathsError, match=match):
             antenna_field_vectors(ant, bad)
+
+
+def test_antenna_arguments_of_the_wrong_kind_get_a_clear_error_and_degrees_a_warning() -> None:
+    """A review found a list as polarisation raising a bare TypeError, a string or booleans
+    accepted as an orientation, and (90, 0, 0) taken silently as radians."""
+    import warnings
+
+    from wavepaths.errors import WavepathsError
+
+    for bad in (dict(polarization=["V"]), dict(orientation="123"), dict(orientation=(True, 0, 0)),
+                dict(orientation=(0.0, "1", 0.0))):
+        with pytest.raises(WavepathsError):
+            Antenna("iso", **bad)
+    with pytest.warns(UserWarning, match="radians"):
+        Antenna("tr38901", orientation=(90.0, 0.0, 0.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert Antenna("tr38901", orientation=(-np.pi, np.pi / 2, 2 * np.pi)).orientation == (-np.pi, np.pi / 2, 2 * np.pi)

@@ -18,6 +18,7 @@ evaluates receive patterns at ``-k_incident`` in the same way).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal, get_args
@@ -64,7 +65,7 @@ def polarization_slant_angles(polarization: PolarizationName) -> tuple[float, ..
         "VH": (0.0, math.pi / 2),
         "cross": (-math.pi / 4, math.pi / 4),
     }
-    if polarization not in table:
+    if not isinstance(polarization, str) or polarization not in table:
         raise WavepathsError(
             f"`polarization` must be one of {list(table)}, got {polarization!r}"
         )
@@ -115,6 +116,10 @@ class Antenna:
                 f"got {self.polarization_model!r}"
             )
         try:
+            if isinstance(self.orientation, (str, bytes)) or any(
+                isinstance(a, (str, bytes, bool, np.bool_)) for a in self.orientation
+            ):
+                raise TypeError("angles must be numbers")
             angles = tuple(float(a) for a in self.orientation)
         except (TypeError, ValueError) as exc:
             raise WavepathsError(
@@ -125,6 +130,13 @@ class Antenna:
             raise WavepathsError(
                 f"`orientation` must be three finite angles (yaw, pitch, roll) in rad, "
                 f"got {self.orientation!r}"
+            )
+        if any(abs(a) > 2 * math.pi for a in angles):
+            warnings.warn(
+                f"antenna orientation {angles} has an angle beyond 2 pi: `Antenna.orientation` is in "
+                "radians (the CLI's --tx-orientation and --rx-orientation are in degrees); if you meant "
+                "degrees, pass np.deg2rad(...)",
+                stacklevel=3,
             )
         object.__setattr__(self, "orientation", angles)
 

@@ -160,7 +160,7 @@ def theta_phi_from_direction(
         Directions whose horizontal part ``sqrt(x^2 + y^2)`` (after normalisation) is
         at most this are on a pole, where the azimuth is undefined and is set to
         ``phi = 0``. This is Sionna RT's choice (``theta_phi_from_unit_vec``); Sionna
-        uses 100 float32 epsilons (about 1.19e-5) because it computes in float32. The
+        uses 100 times Dr.Jit's float32 epsilon (2^-24: about 5.96e-6) because it computes in float32. The
         default 1e-9 is far above the round-off of float64 directions built from
         scene coordinates (about 1e-16 times coordinate/segment length) and far below
         any angle a scene resolves on purpose.
