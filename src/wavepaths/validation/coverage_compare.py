@@ -48,6 +48,14 @@ def _db(x: np.ndarray) -> np.ndarray:
         return 10 * np.log10(x)
 
 
+def _field_gain(cm) -> np.ndarray:
+    """(ny, nx) the power of the field at each cell over both polarisations (``sum |e|^2``,
+    :meth:`~wavepaths.coverage.CoverageMap.field_gain_per_tx`), normalised like the path gain:
+    Sionna's radio map takes the squared norm of the whole field, "an ideal isotropic receiver",
+    where wavepaths' path gain would be the co-polarised power of the V receive antenna."""
+    return cm.field_gain_per_tx(coherent=False)[0]
+
+
 def _cell_average(gain: np.ndarray, inside: np.ndarray, k: int) -> np.ndarray:
     """(ny, nx) linear gain averaged over each cell's k x k sub-cells of ``gain`` (ny k, nx k), a
     sub-cell inside an object counting as zero (as Sionna divides by the whole cell's area); NaN
@@ -86,9 +94,11 @@ def compare_coverage(scene_xml: str, tx, center, size, cell: float, max_depth: i
     tx = np.asarray(tx, dtype=float).reshape(1, 3)
     out = {"scene": scene_xml, "tx": tx[0].tolist(), "center": list(center), "size": list(size), "cell_m": cell,
            "max_depth": max_depth, "noise_floor_db": NOISE_FLOOR_DB, "frequency_hz": frequency_hz,
-           "samples_per_tx": samples_per_tx, "antennas": "isotropic, V, both ends (Sionna's defaults)",
-           "field_model": "wavepaths: UTD (textbook), power sum at the cell centres; Sionna: RadioMapSolver, "
-                          "cell-averaged power", "subsamples": SUBSAMPLES, "reference_factor": REFERENCE_FACTOR,
+           "samples_per_tx": samples_per_tx,
+           "antennas": "transmitter isotropic, V (Sionna's default); no receive antenna (the whole field)",
+           "field_model": "wavepaths: UTD (textbook), power sum at the cell centres, the field's power over both "
+                          "polarisations; Sionna: RadioMapSolver, cell-averaged power of the whole field (an ideal "
+                          "isotropic receiver)", "subsamples": SUBSAMPLES, "reference_factor": REFERENCE_FACTOR,
            "runs": {}}
     for diffraction in (False, True):
         def sionna(samples: int, seed: int = 1):
@@ -104,7 +114,7 @@ def compare_coverage(scene_xml: str, tx, center, size, cell: float, max_depth: i
         cm = coverage(scene, tx, grid, opts, fields=FieldConfig(frequency_hz),
                       settings=CoverageOptions(coherent=False, workers=1))
         wp_time = time.perf_counter() - t0
-        wp_db = cm.path_gain_db()
+        wp_db = _db(_field_gain(cm))
         if wp_db.shape != sn.path_gain_db.shape:
             raise ValueError(f"grid shapes differ: wavepaths {wp_db.shape}, Sionna {sn.path_gain_db.shape}")
         centres_ok = np.allclose(cm.cell_centers[..., :2], sn.cell_centers[..., :2], atol=1e-3 * cell)
@@ -139,7 +149,7 @@ def _decomposition(scene, tx, grid, opts, frequency_hz, sionna, samples, wp_db, 
         m = coverage(scene, tx, fine, options, fields=field_config, settings=settings)
         if m.inside.shape != (SUBSAMPLES * len(compared), SUBSAMPLES * compared.shape[1]):
             raise ValueError(f"the sub-sampled grid {m.inside.shape} does not tile the cells {compared.shape}")
-        return _db(_cell_average(m.path_gain(), m.inside, SUBSAMPLES))
+        return _db(_cell_average(_field_gain(m), m.inside, SUBSAMPLES))
 
     n_ref = f"{REFERENCE_FACTOR * samples:,} samples"
     centre, cell_avg = "at the cell centres, textbook UTD", f"averaged over {SUBSAMPLES} x {SUBSAMPLES} points per cell"

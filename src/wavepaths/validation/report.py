@@ -444,7 +444,8 @@ def write_html(summary: dict, figures: dict, path: str) -> None:
             if r.get("matched_on_multi_object_edges"):
                 parts.append(f"<p class=small>{r['matched_on_multi_object_edges']} matched diffracted path(s) lie on edges "
                              "shared by several objects: wavepaths' true dihedron (seed §3.3) differs from Sionna's "
-                             "single-mesh wedge, so their coefficients are not held to the tolerance.</p>")
+                             "single-mesh wedge, so their coefficients are not held to the tolerance; the wedge_awning "
+                             "boundary line judges that difference against the exact solution.</p>")
             if r.get("matched_on_non_manifold_edges"):
                 parts.append(f"<p class=small>{r['matched_on_non_manifold_edges']} matched diffracted path(s) lie on edges "
                              "where three or more faces of one mesh meet: Sionna's wedge is one pair of them (one block's "

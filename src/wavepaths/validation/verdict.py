@@ -125,10 +125,11 @@ def _num(x) -> str:
 
 
 def _engine_detail(engine: str, v: dict) -> str:
-    """``"Sionna RT 46 dB"``, or ``"Sionna RT no diffracted path"`` when it has none to judge."""
+    """``"Sionna RT 46 dB, 0.92 complex"`` (the largest |u| error and |u - u_exact|), or
+    ``"Sionna RT no diffracted path"`` when it has none to judge."""
     if v.get("receivers") == 0:
         return f"{engine} no diffracted path"
-    return f"{engine} {_num(v['max_db'])} dB"
+    return f"{engine} {_num(v['max_db'])} dB, {_num(v['max_complex_error'])} complex"
 
 
 def known_disagreement_verdicts(known: list, exact: dict) -> dict:
