@@ -265,3 +265,84 @@ def test_the_coverage_api_refuses_cells_beyond_the_coordinate_limit():
     grid = PlanarGrid(center=[0.0, 0.0], height=1e12, size=[4.0, 4.0], cell_size=2.0)
     with pytest.raises(WavepathsError, match="grid cell centres.*beyond"):
         coverage(scene, [[-10.0, 5.0, -5.0]], grid)
+
+
+# ---- from a CLI review (thirtieth session) --------------------------------------------------
+def test_negative_numbers_with_an_exponent_are_values(capsys):
+    """argparse took -1e-6 and -3e9 for options: `--rx 20 -1e-6 1.5` could not be written at all."""
+    code, out, err = run_cli(capsys, "paths", "street_canyon", *TX, "--rx", "20", "-1e-6", "1.5", *LOS_ONLY, "--json")
+    assert code == 0, err
+    assert json.loads(out)["rx"][0] == [20.0, -1e-6, 1.5]
+    code, out, err = run_cli(capsys, "paths", "street_canyon", *TX, "--rx", "2e1", "-0.0", "15e-1", *LOS_ONLY,
+                             "--json")
+    assert code == 0 and json.loads(out)["rx"][0] == [20.0, 0.0, 1.5], err
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, "--frequency", "-3e9")
+    assert code == 2 and "frequency" in err and "expected one argument" not in err  # the range error
+
+
+def test_paths_checks_the_materials_frequency_before_the_search(capsys, monkeypatch):
+    import wavepaths.search
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("searched before the frequency was checked")
+
+    monkeypatch.setattr(wavepaths.search, "trace", no_search)
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, "--frequency", "28e9")
+    assert code == 2 and "outside the valid range of material" in err
+
+
+def test_a_failed_run_leaves_no_empty_output_folder(capsys, tmp_path):
+    new = tmp_path / "new"
+    code, _, err = run_cli(capsys, "coverage", "box_on_ground", "--tx", -20, 0, 5, "--height", 1.5, "--cell", 0, "--quiet",
+                           "--out", new)
+    assert code == 2 and "cell" in err and not new.exists()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    code, _, _ = run_cli(capsys, "coverage", "box_on_ground", "--tx", -20, 0, 5, "--height", 1.5, "--cell", 0, "--quiet",
+                         "--out", kept)
+    assert code == 2 and kept.is_dir()  # a folder the user had stays
+
+
+def test_out_of_memory_is_one_line_and_status_2(capsys, monkeypatch):
+    import wavepaths.cli as cli
+
+    def exhausted(args):
+        raise MemoryError("Unable to allocate 7.45 GiB")
+
+    monkeypatch.setattr(cli, "_cmd_info", exhausted)
+    code, _, err = run_cli(capsys, "info", "street_canyon")
+    assert code == 2 and err.count("\n") == 1 and "out of memory" in err and "Traceback" not in err
+
+
+def test_launched_sampling_has_an_upper_bound():
+    from wavepaths.search.options import MAX_LAUNCH_FAN, MAX_LAUNCH_RAYS
+
+    TraceOptions(launch_rays=MAX_LAUNCH_RAYS, launch_fan=MAX_LAUNCH_FAN)
+    with pytest.raises(WavepathsError, match="launch_rays"):
+        TraceOptions(launch_rays=MAX_LAUNCH_RAYS + 1)
+    with pytest.raises(WavepathsError, match="launch_fan"):
+        TraceOptions(launch_fan=100_000_000)
+
+
+def test_gtd_on_a_boundary_is_warned_about():
+    """The README's receiver lies exactly on a reflection boundary of two R-D paths: Keller's
+    coefficient diverges there (+51 dB each), the UTD does not."""
+    from wavepaths.fields import compute_fields
+
+    scene = load_scene("street_canyon")
+    paths = trace(scene, np.array([[-60.0, 0, 10]]), np.array([[20.0, 0, 1.5]]), TraceOptions())
+    with pytest.warns(WavepathsWarning, match="GTD diverges"):
+        gtd = compute_fields(scene, paths, FieldConfig(model="gtd"))
+    assert gtd.path_gain_db().max() > 0  # the divergence the warning is about
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        utd = compute_fields(scene, paths, FieldConfig())
+    assert utd.path_gain_db().max() < -60
+
+
+def test_bench_refuses_an_empty_list_of_benchmarks(capsys, tmp_path):
+    """`--only ""` used to start the full suite."""
+    code, _, err = run_cli(capsys, "bench", "--out", tmp_path / "b", "--only", "")
+    assert code == 2 and "unknown benchmark" in err and not (tmp_path / "b").exists()

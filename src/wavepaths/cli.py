@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 import warnings
 from typing import Callable, Sequence
@@ -117,7 +118,9 @@ def _cmd_paths(args) -> int:
     scene = _scene(args)
     tx = np.array(args.tx, dtype=float).reshape(-1, 3)
     rx = np.array(args.rx, dtype=float).reshape(-1, 3)
-    field_cfg = _field_config(args)  # checked before the search
+    field_cfg = _field_config(args)  # checked before the search, with the scene's materials
+    if field_cfg is not None:
+        field_cfg.check_materials(scene)
     options = _trace_options(args)
     paths = trace(scene, tx, rx, options)
     result = None
@@ -285,7 +288,8 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
 
 def _add_field_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frequency", type=float, default=3.5e9, help="carrier frequency [Hz] (default 3.5e9)")
-    p.add_argument("--model", choices=["utd", "gtd"], default="utd", help="diffraction coefficients (default utd)")
+    p.add_argument("--model", choices=["utd", "gtd"], default="utd", help="diffraction coefficients: utd (Kouyoumjian-Pathak, the default) or gtd (Keller's, "
+                        "which diverges on shadow and reflection boundaries: warned about)")
     p.add_argument("--compat", choices=["none", "sionna"], default="none",
                    help="'sionna' reproduces Sionna RT 2.2's diffraction combination")
     patterns = ["iso", "dipole", "hw_dipole", "tr38901"]
@@ -330,7 +334,22 @@ def build_parser() -> argparse.ArgumentParser:
 
     for _name, hook in _extra_commands():
         hook(sub)
+    _accept_negative_numbers(parser)
     return parser
+
+
+# every spelling of a negative number, exponents included: argparse's own pattern takes -1e-6
+# and -3e9 for options, so that `--rx 20 -1e-6 1.5` could not be written at all
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+def _accept_negative_numbers(parser: argparse.ArgumentParser) -> None:
+    """Let ``parser`` and its subcommands' parsers read ``-1e-6`` as a value, not an option."""
+    parser._negative_number_matcher = _NEGATIVE_NUMBER  # argparse's only hook for this
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _accept_negative_numbers(child)
 
 
 def _version() -> str:
@@ -354,17 +373,29 @@ def _extra_commands() -> list[tuple[str, Callable]]:
     return hooks
 
 
-def _prepare_out(args) -> None:
+def _prepare_out(args) -> str | None:
     """Create the output folder of the commands that take one (``--out DIR``: coverage, validate,
     bench) before any work, so that a path that cannot be a folder (an existing file, a path
-    under one) is a clear error up front, not a traceback after a long computation."""
+    under one) is a clear error up front, not a traceback after a long computation. Return the
+    folder when this call created it (:func:`main` removes it again, empty, if the run fails)."""
     out = getattr(args, "out", None)
     if out is None:
-        return
+        return None
+    created = not os.path.exists(out)
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as exc:
         raise WavepathsError(f"--out {out!r} cannot be used as an output folder ({exc.strerror or exc})") from None
+    return out if created else None
+
+
+def _remove_if_empty(folder: str | None) -> None:
+    """Remove a folder this run created and left empty (a run that failed before writing)."""
+    if folder is not None:
+        try:
+            os.rmdir(folder)  # only an empty folder goes
+        except OSError:
+            pass
 
 
 def _first_run_notice(args) -> None:
@@ -401,22 +432,35 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    created, status = None, 1
     try:
-        _prepare_out(args)
+        created = _prepare_out(args)
         _first_run_notice(args)
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning
-            return int(args.func(args) or 0)
+            status = int(args.func(args) or 0)
+            return status
     except WavepathsError as exc:
         print(f"wavepaths {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        status = 2
+        return status
+    except MemoryError as exc:
+        print(f"wavepaths {args.command}: error: out of memory ({exc}); ask for less at once: fewer receivers "
+              "or cells, fewer --launch-rays or a smaller --launch-fan, a lower order", file=sys.stderr)
+        status = 2
+        return status
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        status = 130
+        return status
     except BrokenPipeError:  # the reader went away (`wavepaths info ... | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
+        status = 0
+        return status
+    finally:
+        if status != 0:
+            _remove_if_empty(created)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -151,3 +151,18 @@ def test_spaced_material_names_are_matched():
     for name in ("ITU Concrete", "itu_concrete", "Mat-ITU_Concrete", "concrete"):
         assert material_by_name(name).name == "concrete"
     assert material_by_name("Medium Dry Ground").name == "medium_dry_ground"
+
+
+@pytest.mark.parametrize("encoding", ["cp1252", "utf-8-sig", "utf-8"])
+def test_an_obj_file_in_a_windows_encoding_loads(tmp_path, encoding):
+    """A review found an OBJ with one Latin-1 comment refused ("No module named
+    'charset_normalizer'", trimesh's guess of the encoding): such files come from Windows CAD
+    and GIS exports. UTF-8, with or without a byte-order mark, and cp1252 all load, the names
+    read as written where the encoding says so."""
+    text = ("# Bâtiment en béton\no sol\n" + GROUND + "usemtl itu_medium_dry_ground\nf 1 2 3 4\n"
+            "o bâtiment\n" + BOX + "usemtl itu_concrete\n" + BOX_FACES)
+    path = tmp_path / "city.obj"
+    path.write_bytes(text.encode(encoding))
+    scene = load_scene(str(path))
+    assert scene.object_names == ("sol", "bâtiment")
+    assert names(scene) == ["medium_dry_ground"] * 2 + ["concrete"] * 12

@@ -10,8 +10,8 @@ from .report import BENCHMARKS
 def _run(args) -> int:
     from .report import run_bench
 
-    only = args.only.split(",") if args.only else None
-    if only:
+    only = None if args.only is None else [x.strip() for x in args.only.split(",")]
+    if only is not None:
         bad = [x for x in only if x not in BENCHMARKS]
         if bad:
             print(f"wavepaths bench: error: unknown benchmark(s) {bad}; choose from {', '.join(BENCHMARKS)}",
@@ -40,7 +40,8 @@ def add_parser(sub) -> None:
                                      "scaling, cost of diffraction) and write an HTML report and bench.json")
     p.add_argument("--out", required=True, help="output directory (bench.json, index.html, scene files)")
     p.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats (about 3 minutes)")
-    p.add_argument("--only", default="", help=f"comma-separated subset of: {', '.join(BENCHMARKS)}")
+    p.add_argument("--only", default=None, help=f"comma-separated subset of: {', '.join(BENCHMARKS)} (all when "
+                                                "not given; an empty list is an error)")
     p.add_argument("--munich", action="store_true",
                    help="also the scale target: a coverage map of Sionna's munich scene (long; child process "
                         "limited to 30 min and 8 GiB)")

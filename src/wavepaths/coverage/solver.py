@@ -520,12 +520,7 @@ def _check_types(scene, grid, opts, cfg, cov) -> None:
 
 def _check_materials(scene: Scene, cfg: FieldConfig) -> None:
     """Fail before tracing, not in a worker, when a material has no value at the frequency."""
-    from ..em.materials import relative_permittivity
-
-    for i in np.unique(scene.triangle_material):
-        material = scene.materials[i]
-        if material.kind not in ("pec", "absorber"):
-            relative_permittivity(material, cfg.frequency_hz)  # raises WavepathsError out of range
+    cfg.check_materials(scene)
 
 
 def _check_off_transmitters(scene: Scene, tx: np.ndarray, flat: np.ndarray, active: np.ndarray, grid: Grid) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from .chain import coefficients_and_fields, path_coefficients, transfer_matrices
 from .config import FieldConfig
 from .result import FieldResult
@@ -32,7 +34,35 @@ def compute_fields(scene: "Scene", paths: "Paths", config: FieldConfig | None = 
     cfg = config or FieldConfig()
     a, e = coefficients_and_fields(scene, paths, cfg)
     _warn_near_field(paths, cfg)
+    _warn_gtd_on_boundaries(paths, a, cfg)
     return FieldResult(paths, a, cfg.frequency_hz, cfg.tx_power_dbm, incident_field=e)
+
+
+GTD_EXCESS_DB = 60.0  # a GTD path this far above free space at its length lies on a boundary
+
+
+def _warn_gtd_on_boundaries(paths: "Paths", a, cfg: FieldConfig) -> None:
+    """A :class:`~wavepaths.scene.WavepathsWarning` when Keller's GTD (``model="gtd"``) gives a
+    diffracted path more than :data:`GTD_EXCESS_DB` above free space at its length: its
+    coefficient diverges on the shadow and reflection boundaries (:func:`wavepaths.em.gtd.keller_coefficients`
+    floors the denominator), where such a receiver lies. A review found the README's receiver
+    (exactly on a reflection boundary) reported at +57 dB without a word."""
+    import warnings
+
+    from ..scene.model import WavepathsWarning, external_stacklevel
+
+    if cfg.model != "gtd" or len(paths) == 0:
+        return
+    gain = np.abs(np.asarray(a)).reshape(len(paths), -1).max(axis=1)
+    free_space = cfg.wavelength / (4 * np.pi * paths.lengths)
+    wild = gain > free_space * 10 ** (GTD_EXCESS_DB / 20)
+    if wild.any():
+        warnings.warn(
+            f"{int(wild.sum())} diffracted path(s) lie on a shadow or reflection boundary, where Keller's GTD "
+            f"diverges: their gain is over {GTD_EXCESS_DB:g} dB above free space (up to "
+            f"{20 * np.log10(gain[wild].max()):+.1f} dB) and not physical; the UTD (the default model) is finite there",
+            WavepathsWarning, stacklevel=external_stacklevel(),
+        )
 
 
 def _warn_near_field(paths: "Paths", cfg: FieldConfig) -> None:

@@ -95,6 +95,17 @@ class FieldConfig:
                 or not math.isfinite(self.tx_power_dbm):
             raise WavepathsError(f"`tx_power_dbm` must be a finite number [dBm], got {self.tx_power_dbm!r}")
 
+    def check_materials(self, scene) -> None:
+        """Raise :class:`~wavepaths.errors.WavepathsError` now, before a search, when a material of
+        ``scene``'s faces has no value at this frequency (an ITU-R P.2040 material outside its
+        range): the fields would fail only after the whole search."""
+        from ..em.materials import relative_permittivity
+
+        for i in np.unique(scene.triangle_material):
+            material = scene.materials[i]
+            if material.kind not in ("pec", "absorber"):
+                relative_permittivity(material, self.frequency_hz)  # raises out of range
+
     @property
     def wavelength(self) -> float:
         """Free-space wavelength [m]."""

@@ -28,7 +28,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
 from ..errors import SceneError
 from .model import WavepathsWarning, external_stacklevel
@@ -90,8 +89,19 @@ class ConcaveFace:
 
 
 def read_obj_text(path: str) -> str:
+    """The text of an OBJ file: UTF-8 (a byte-order mark dropped), else Latin-1.
+
+    Exports from Windows CAD and GIS tools often carry cp1252 comments or names; Latin-1 reads
+    every byte, and the geometry is ASCII either way. (trimesh's own guess needed the optional
+    ``charset_normalizer`` and failed without it.)
+    """
     with open(path, "rb") as fh:
-        return trimesh.util.decode_text(fh.read()).replace("\r\n", "\n")
+        data = fh.read()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    return text.replace("\r\n", "\n")
 
 
 def _index(token: str, count: int, path: str, line: int) -> int:

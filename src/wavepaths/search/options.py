@@ -51,6 +51,12 @@ BOOLEAN_FIELDS = ("los", "diffraction", "lit_region", "skip_absorbers", "compile
 """The :class:`TraceOptions` fields that take ``True`` or ``False`` (Python or numpy booleans)."""
 
 
+# upper bounds of the launched searches' sampling (32x and 256x the defaults): beyond them the
+# rays' arrays alone take tens of GB, and a typo should be an error, not a swap storm
+MAX_LAUNCH_RAYS = 1 << 26
+MAX_LAUNCH_FAN = 1 << 16
+
+
 @dataclass(frozen=True)
 class TraceOptions:
     """Which propagation mechanisms to search for, and up to which order.
@@ -210,10 +216,12 @@ class TraceOptions:
         if self.reflection_candidates not in ("exhaustive", "launched"):
             raise WavepathsError(f"`reflection_candidates` must be 'exhaustive' or 'launched', got "
                                  f"{self.reflection_candidates!r}")
-        if self.launch_rays < 16:
-            raise WavepathsError(f"`launch_rays` must be at least 16, got {self.launch_rays}")
-        if self.launch_fan < 4:
-            raise WavepathsError(f"`launch_fan` must be at least 4, got {self.launch_fan}")
+        if not 16 <= self.launch_rays <= MAX_LAUNCH_RAYS:
+            raise WavepathsError(f"`launch_rays` must be in 16..{MAX_LAUNCH_RAYS:,} (the default {1 << 21:,}; more "
+                                 f"would take tens of GB), got {self.launch_rays:,}")
+        if not 4 <= self.launch_fan <= MAX_LAUNCH_FAN:
+            raise WavepathsError(f"`launch_fan` must be in 4..{MAX_LAUNCH_FAN:,} (the default 256; more would take "
+                                 f"tens of GB), got {self.launch_fan:,}")
         if self.rx_batch < 1:
             raise WavepathsError(f"`rx_batch` must be positive, got {self.rx_batch}")
 
