@@ -230,3 +230,22 @@ def test_occlusion_rates_compare_the_casters_and_the_rule():
         assert set(r["ns_per_segment"]) == {"numpy", "compiled", "float64 tree"}
         assert r["same_verdicts"] and r["tree_matches_rule"]
         assert r["embree_misses_of_rule"] >= 0
+
+
+def test_the_tradeoff_verdict_is_also_taken_against_each_engines_own_limit():
+    """The common reference is wavepaths' own converged answer (error 0 by construction): a
+    review asked for the verdict with each engine against its own limit beside it. Sionna's
+    largest run has no error against itself and is left out of that verdict."""
+    from wavepaths.bench.tradeoff import _dominates
+
+    wp = [{"label": "R3", "time_s": 0.01, "error": {"mean_abs_db": 2.0}},
+          {"label": "R3+D2", "time_s": 0.05, "error": {"mean_abs_db": 0.0}}]
+    sn = [{"label": "1e4", "time_s": 0.02, "error": {"mean_abs_db": 3.0}, "error_vs_own_limit": {"mean_abs_db": 1.0}},
+          {"label": "1e6", "time_s": 0.5, "error": {"mean_abs_db": 1.2}, "error_vs_own_limit": {"mean_abs_db": 0.1}},
+          {"label": "1e8", "time_s": 10.0, "error": {"mean_abs_db": 1.1}, "error_vs_own_limit": None}]
+    common = _dominates(wp, sn)
+    assert common["every_sionna_point_beaten"] and len(common["rows"]) == 3
+    own = _dominates(wp, sn, "error_vs_own_limit")
+    assert [r["sionna"] for r in own["rows"]] == ["1e4", "1e6"]
+    assert [r["wavepaths_better"] for r in own["rows"]] == [False, True]  # 2.0 dB within 0.02 s against 1.0 dB
+    assert not own["every_sionna_point_beaten"]
