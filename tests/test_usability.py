@@ -82,6 +82,9 @@ def test_coverage_json_records_the_settings_behind_its_numbers(capsys, tmp_path)
         meta = json.loads(str(saved["metadata"]))
     for key in ("trace_options", "field_config", "coverage_options"):
         assert meta[key] == d[key]
+    # where and at what frequency (a CLI review: `paths --json` had them, `coverage --json` not)
+    assert d["frequency_hz"] == meta["frequency_hz"] == 3.5e9 and d["tx"] == [[-60.0, 0.0, 10.0]]
+    assert d["grid"] == meta["grid"] and d["coherent"] is False
 
 
 # ---- 2. misused API arguments -----------------------------------------------------------------

@@ -176,6 +176,12 @@ def run(args) -> int:
         "trace_options": cmap.metadata["trace_options"],
         "field_config": cmap.metadata["field_config"],
         "coverage_options": cmap.metadata["coverage_options"],
+        # where and at what frequency: named as ``paths --json`` names them ("tx", "frequency_hz")
+        # and as the .npz's metadata names the grid; "coherent" says how min / max add the paths
+        "frequency_hz": cmap.frequency_hz,
+        "tx": np.asarray(cmap.tx_positions, dtype=float).tolist(),
+        "grid": cmap.grid.describe(),
+        "coherent": bool(cmap.coherent),
     }
     if args.json:
         print(json_text(summary))
