@@ -349,3 +349,24 @@ def test_bench_refuses_an_empty_list_of_benchmarks(capsys, tmp_path):
     """`--only ""` used to start the full suite."""
     code, _, err = run_cli(capsys, "bench", "--out", tmp_path / "b", "--only", "")
     assert code == 2 and "unknown benchmark" in err and not (tmp_path / "b").exists()
+
+
+def test_flags_that_do_nothing_are_warned_about(capsys):
+    """A CLI review found --tolerance-db with --no-diffraction, --launch-fan without launched
+    candidates and a search of nothing all accepted in silence."""
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, "--no-diffraction", "--diffraction-reflections",
+                           0, "--launch-fan", 512, "--max-reflections", 0)
+    assert code == 0
+    assert "ignored: --diffraction-reflections (with --no-diffraction)" in err
+    assert "--launch-fan (without --diffraction-candidates launched)" in err
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, "--no-los", "--no-diffraction",
+                           "--max-reflections", 0)
+    assert code == 0 and "leave nothing to search" in err
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, *LOS_ONLY)
+    assert code == 0 and "warning" not in err  # the usual flags: no word
+
+
+def test_a_cell_larger_than_the_area_is_refused(capsys, tmp_path):
+    code, _, err = run_cli(capsys, "coverage", "box_on_ground", "--tx", -20, 0, 5, "--height", 1.5, "--cell", 1e300,
+                           "--quiet", "--out", tmp_path / "c")
+    assert code == 2 and "larger than the area" in err and not (tmp_path / "c").exists()

@@ -76,7 +76,10 @@ def _cmd_info(args) -> int:
         return 0
     print(f"scene      {info['source']}")
     print(f"triangles  {info['triangles']}")
-    print(f"objects    {info['objects']} ({', '.join(info['object_names'])})")
+    names = info["object_names"]
+    shown = ", ".join(names[:INFO_NAMES]) + (f", ... and {len(names) - INFO_NAMES} more (--json lists them all)"
+                                             if len(names) > INFO_NAMES else "")
+    print(f"objects    {info['objects']} ({shown})")
     print(f"materials  {info['materials']} ({', '.join(info['material_names'])})")
     print(f"polygons   {info['polygons']}")
     by = info["dihedra_by_face_count"]
@@ -88,9 +91,40 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _warn_ignored_flags(args) -> None:
+    """Say so when a trace flag given on the command line has no effect with the others (a
+    review found them all accepted in silence, and a search of nothing reported as a result)."""
+    from .scene.model import WavepathsWarning
+
+    ignored = []
+    if args.no_diffraction:
+        for flag, given in (("--diffraction-reflections", args.diffraction_reflections != 1),
+                            ("--no-lit-region", args.no_lit_region),
+                            ("--no-free-edges", getattr(args, "no_free_edges", False)),
+                            ("--tolerance-db", getattr(args, "tolerance_db", None) is not None),
+                            ("--diffraction-candidates", getattr(args, "diffraction_candidates", "exhaustive")
+                             != "exhaustive")):
+            if given:
+                ignored.append(f"{flag} (with --no-diffraction)")
+    if getattr(args, "launch_fan", 256) != 256 and getattr(args, "diffraction_candidates", "exhaustive") != "launched":
+        ignored.append("--launch-fan (without --diffraction-candidates launched)")
+    if (getattr(args, "launch_rays", 1 << 21) != 1 << 21
+            and getattr(args, "reflection_candidates", "exhaustive") != "launched"):
+        ignored.append("--launch-rays (without --reflection-candidates launched)")
+    if ignored:
+        warnings.warn("ignored: " + "; ".join(ignored), WavepathsWarning, stacklevel=2)
+    if args.no_los and args.no_diffraction and args.max_reflections == 0:
+        warnings.warn("--no-los, --no-diffraction and --max-reflections 0 leave nothing to search: no path will "
+                      "be found", WavepathsWarning, stacklevel=2)
+
+
+INFO_NAMES = 12  # object names `info` prints (a city has hundreds: --json has them all)
+
+
 def _trace_options(args):
     from .search import TraceOptions
 
+    _warn_ignored_flags(args)
     return TraceOptions(
         los=not args.no_los,
         max_reflections=args.max_reflections,
@@ -267,8 +301,9 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
                    help="reflections combined with the diffraction, before and after (default 1)")
     p.add_argument("--no-lit-region", action="store_true", help="diffraction only in the incident shadow")
     p.add_argument("--no-free-edges", action="store_true",
-                   help="no diffraction on free edges (edges of one face: a screen's or a finite ground's border; "
-                        "Sionna RT without edge_diffraction also skips edges whose other faces are other objects')")
+                   help="no diffraction on free edges (edges of one face: a screen's or a finite ground's border); "
+                        "Sionna RT without edge_diffraction skips these, and also the edges shared with another "
+                        "object")
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
                    help="drop reflected paths whose length alone (|reflection coefficient| <= 1) puts them at "
@@ -288,7 +323,8 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
 
 def _add_field_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frequency", type=float, default=3.5e9, help="carrier frequency [Hz] (default 3.5e9)")
-    p.add_argument("--model", choices=["utd", "gtd"], default="utd", help="diffraction coefficients: utd (Kouyoumjian-Pathak, the default) or gtd (Keller's, "
+    p.add_argument("--model", choices=["utd", "gtd"], default="utd",
+                   help="diffraction coefficients: utd (Kouyoumjian-Pathak, the default) or gtd (Keller's, "
                         "which diverges on shadow and reflection boundaries: warned about)")
     p.add_argument("--compat", choices=["none", "sionna"], default="none",
                    help="'sionna' reproduces Sionna RT 2.2's diffraction combination")

@@ -78,6 +78,10 @@ def _grid(args, scene):
     center = np.array(args.center if args.center else 0.5 * (lo[:2] + hi[:2]), dtype=float)
     size = np.array(args.size if args.size else hi[:2] - lo[:2], dtype=float)
     check_grid_reach(args.height, center, size)
+    if np.isfinite(args.cell) and np.isfinite(size).all() and args.cell > 0 and args.cell > np.abs(size).max():
+        raise WavepathsError(f"--cell {args.cell:g} m is larger than the area ({' x '.join(f'{v:g}' for v in size)} m"
+                             f"{', --size' if args.size else ', the scene footprint'}): a map of one cell that "
+                             "overhangs it; give a smaller --cell")
     return PlanarGrid(center=center, size=size, cell_size=args.cell, height=args.height)
 
 
