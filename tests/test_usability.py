@@ -370,3 +370,14 @@ def test_a_cell_larger_than_the_area_is_refused(capsys, tmp_path):
     code, _, err = run_cli(capsys, "coverage", "box_on_ground", "--tx", -20, 0, 5, "--height", 1.5, "--cell", 1e300,
                            "--quiet", "--out", tmp_path / "c")
     assert code == 2 and "larger than the area" in err and not (tmp_path / "c").exists()
+
+
+def test_cli_errors_name_the_flags_not_the_api(capsys, tmp_path):
+    """A review found `cell_size` in the error where the user had typed --cell."""
+    code, _, err = run_cli(capsys, "coverage", "box_on_ground", "--tx", -20, 0, 5, "--height", 1.5, "--cell", 0,
+                           "--quiet", "--out", tmp_path / "c")
+    assert code == 2 and "--cell must be positive" in err and "cell_size" not in err
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, "--launch-fan", 2)
+    assert code == 2 and "--launch-fan must be in" in err
+    code, _, err = run_cli(capsys, "paths", "street_canyon", *TX, *RX, "--frequency", 2e13)
+    assert code == 2 and "--frequency must be in" in err

@@ -425,6 +425,28 @@ def _prepare_out(args) -> str | None:
     return out if created else None
 
 
+# the API's names of settings whose flag is not the name with dashes
+_FLAG_OF = {"frequency_hz": "--frequency", "cell_size": "--cell", "tx_antenna": "--tx-antenna",
+            "rx_antenna": "--rx-antenna"}
+
+
+def _in_flags(message: str, parser: argparse.ArgumentParser, command: str) -> str:
+    """An API error message in the command line's words: each backticked setting that is a
+    flag of ``command`` (```launch_fan``` -> ``--launch-fan``, ```cell_size``` -> ``--cell``)
+    is named by its flag (a review found `cell_size` where the user had typed --cell)."""
+    flags: set[str] = set()
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            flags = {o for a in action.choices[command]._actions for o in a.option_strings}
+
+    def flag(match: re.Match) -> str:
+        name = match.group(1)
+        candidate = _FLAG_OF.get(name, "--" + name.replace("_", "-"))
+        return candidate if candidate in flags else match.group(0)
+
+    return re.sub(r"`([a-z][a-z0-9_]*)`", flag, message)
+
+
 def _remove_if_empty(folder: str | None) -> None:
     """Remove a folder this run created and left empty (a run that failed before writing)."""
     if folder is not None:
@@ -478,7 +500,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             status = int(args.func(args) or 0)
             return status
     except WavepathsError as exc:
-        print(f"wavepaths {args.command}: error: {exc}", file=sys.stderr)
+        print(f"wavepaths {args.command}: error: {_in_flags(str(exc), parser, args.command)}", file=sys.stderr)
         status = 2
         return status
     except MemoryError as exc:
