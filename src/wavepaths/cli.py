@@ -307,8 +307,9 @@ def _add_trace_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-los", action="store_true", help="leave out the line of sight")
     p.add_argument("--prune-db", type=float, default=None,
                    help="drop reflected paths whose length alone (|reflection coefficient| <= 1) puts them at "
-                        "least this many dB below free space at the direct distance; a path's actual "
-                        "coefficients are not looked at (bound in TraceOptions.prune_db)")
+                        "least this many dB below free space at the direct distance, for isotropic antennas "
+                        "(with directive ones, add both peak gains in dBi); a path's actual coefficients are "
+                        "not looked at (bound in TraceOptions.prune_db)")
     p.add_argument("--diffraction-candidates", choices=["exhaustive", "launched"], default="exhaustive",
                    help="diffracted candidates: every one no test rules out (default; complete), or those that "
                         "sampled Keller fans carry to each receiver (dense cities; may miss a path)")
