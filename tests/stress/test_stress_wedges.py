@@ -273,8 +273,14 @@ S6 = (
 def test_needle_plate_keeps_both_nearly_parallel_edges(h):
     """A needle triangle (0,0,0), (10,0,0), (10,0,h) standing in y = 0: its long edges meet at
     the angle h / 10 (1e-3 .. 5e-6 rad). Both diffract: each has its Keller point inside (checked
-    in closed form), so two diffraction paths; and as the needle vanishes the total field tends
-    to the direct field (within 5 % here, h <= 1e-2 m = lambda / 10)."""
+    in closed form), so two diffraction paths. The line of sight passes just above the needle,
+    in one edge's shadow-boundary region and just lit for the other: each edge's field is
+    0.36-0.39 of the direct one, and their transition terms cancel, leaving 3.25 % of it for
+    every h <= 1e-3 m (3.4 % at 1e-2). That residual does not vanish with h: single diffraction
+    on edges closer than a wavelength misses their interaction (the two edges' smooth terms
+    are equal, not opposite), a limit of ray theory, not of the search. Held at 4 % (a review
+    found the former 5 % let every diffraction scaled by 1.3 pass; now it fails), with each
+    edge's field above 0.3 of the direct one, so that the cancellation is tested."""
     s = tri_scene([[0, 0, 0], [10, 0, 0], [10, 0, h]], [[0, 1, 2]])
     tx, rx = np.array([[5.0, -4.0, 0.3]]), np.array([[5.5, 6.0, -0.2]])
     t, p, f = total_field(s, tx, rx, OPTS)
@@ -290,7 +296,8 @@ def test_needle_plate_keeps_both_nearly_parallel_edges(h):
         assert 0 < (te * dr + tr * de) / (de + dr) < np.linalg.norm(end)
     assert len(on_long) == 2
     los = f.a_phased[p.depth == 0].sum()
-    assert abs(t[0] - los) <= 0.05 * abs(los)
+    assert all(abs(f.a_phased[i]) > 0.3 * abs(los) for i in on_long)
+    assert abs(t[0] - los) <= 0.04 * abs(los), abs(t[0] - los) / abs(los)
 
 
 @pytest.mark.parametrize("tilt", [0.0, 1e-7, 1e-4])
