@@ -287,7 +287,8 @@ def line_summary(line: BoundaryLine) -> dict:
     complex ``u`` along the circle as two lists, ``{"re": (k,), "im": (k,)}``, one value per
     ``phi_deg``; :func:`curves_from_summary` reads them back.
     """
-    return {"errors": line_errors(line), "diffracted_errors": diffracted_errors(line), "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
+    return {"errors": line_errors(line), "diffracted_errors": diffracted_errors(line),
+            "phi_deg": line.phi_deg.tolist(), "phi_prime_deg": float(line.phi_prime_deg),
             "boundaries_deg": {k: float(v) for k, v in line.boundaries_deg.items()}, "k_rho": float(line.k_rho),
             "path_counts": line.path_counts, "sionna_delay_phase_rad": line.sionna_delay_phase,
             "settings": line.settings,

@@ -280,7 +280,7 @@ def _coverage_decomposition_html(cov: dict) -> str:
              "diffracts only from the transmitter to an edge to the cell, with no reflection before or after); and "
              "the diffraction coefficient (Sionna's combination, which the boundary lines above judge against the "
              "exact solutions). Like for like, with the last two matched and wavepaths averaged over each cell, the "
-             "maps must agree with Sionna at ten times its samples within "
+             f"maps must agree with Sionna at {cov.get('reference_factor', 10)} times its samples within "
              f"{runs[next(iter(runs))]['like_for_like']['tolerances']['std_db']} dB std and "
              f"{runs[next(iter(runs))]['like_for_like']['tolerances']['abs_median_db']} dB median.</p>"]
     for name, r in runs.items():

@@ -22,8 +22,8 @@ plane wave, receivers at k rho ~ 73 from the edge, 3.5 GHz):
 The same tolerances hold each engine's diffracted paths alone against the exact field minus its
 geometrical optics (:func:`~wavepaths.validation.lines.diffracted_errors`, at the receivers
 where the engine has a diffracted path): that measure isolates the diffraction coefficient from
-a missing reflection or a delay floor. wavepaths' UTD measures 0.001 to 0.02 dB and at most 6e-4
-there (the spherical wave's curvature is in the geometrical-optics terms). A known
+a missing reflection or a delay floor. wavepaths' UTD measures 0.0008 to 0.0045 dB and at most
+3.4e-4 there on the three lines (the spherical wave's curvature is in the geometrical-optics terms). A known
 disagreement about a coefficient is judged on it (``"exact_measure": "diffracted"``).
 """
 
