@@ -219,4 +219,4 @@ def test_cli_dask_address_that_is_no_address_exits_2(tmp_path):
 def test_cli_non_finite_tx_power_exits_2(tmp_path, power):
     r = run("street_canyon", "--tx", -60, 0, 10, "--height", 1.5, "--cell", 8, f"--tx-power-dbm={power}", "--out",
             tmp_path, "--workers", 1, "--quiet")
-    assert r.returncode == 2 and "Traceback" not in r.stderr and "tx_power_dbm" in r.stderr
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "--tx-power-dbm" in r.stderr  # named by its flag

@@ -226,4 +226,4 @@ def test_tx_power_must_be_a_finite_number(power):
 @pytest.mark.parametrize("power", ["nan", "inf", "-inf"])
 def test_cli_non_finite_tx_power_exits_2(power):
     r = run_paths("half_plane", "--tx", -10, 5, -5, "--rx", 10, -5, -5, f"--tx-power-dbm={power}", "--json")
-    assert r.returncode == 2 and "Traceback" not in r.stderr and "tx_power_dbm" in r.stderr
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "--tx-power-dbm" in r.stderr  # named by its flag
