@@ -387,7 +387,7 @@ def coverage(
         # the diffraction bound needs the frequency, which the map knows (so does prune_db then)
         opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
     tx = check_positions("tx", tx)
-    _check_materials(scene, cfg)
+    cfg.check_materials(scene)  # fail before tracing, not in a worker
     m = len(tx)
     n = grid.num_cells
     need = n * (RESULT_BYTES_PER_CELL + m * RESULT_BYTES_PER_CELL_TX)
@@ -516,11 +516,6 @@ def _check_types(scene, grid, opts, cfg, cov) -> None:
         if not isinstance(value, kind):
             want = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
             raise WavepathsError(f"`{name}` must be a {want}, got {type(value).__name__}")
-
-
-def _check_materials(scene: Scene, cfg: FieldConfig) -> None:
-    """Fail before tracing, not in a worker, when a material has no value at the frequency."""
-    cfg.check_materials(scene)
 
 
 def _check_off_transmitters(scene: Scene, tx: np.ndarray, flat: np.ndarray, active: np.ndarray, grid: Grid) -> None:
