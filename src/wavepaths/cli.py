@@ -183,6 +183,7 @@ def _cmd_paths(args) -> int:
         if result is not None:
             out["frequency_hz"] = result.frequency_hz
         out.update(run_settings(options, field_cfg if result is not None else None))
+        out["units"] = PATHS_JSON_UNITS
         print(json_text(out))
         return 0
     print(f"{plural(len(records), 'path')} in {scene.source}")
@@ -200,6 +201,25 @@ def _cmd_paths(args) -> int:
     if result is not None:
         _print_receiver_totals(receivers, len(tx), power_given=getattr(args, "tx_power_dbm", None) is not None)
     return 0
+
+
+PATHS_JSON_UNITS = {
+    "tx": "m", "rx": "m", "paths.vertices": "m", "paths.length_m": "m", "paths.delay_s": "s",
+    "paths.departure_deg": "deg", "paths.arrival_deg": "deg",
+    "paths.a": "[re, im] of the complex path coefficient, normalised like Sionna RT's Paths.a (unit transmit "
+               "power, transmit port 0, receive port 0), without the carrier phase exp(-j 2 pi f tau): "
+               "the receiver's coherent total is sum a exp(-j 2 pi frequency_hz delay_s)",
+    "paths.gain_db": "dB (20 log10 |a|)",
+    "receivers.position": "m", "receivers.path_gain_db": "dB", "receivers.path_gain_incoherent_db": "dB",
+    "receivers.received_power_dbm": "dBm", "receivers.field_strength_v_m": "V/m",
+    "receivers.field_strength_dbuv_m": "dBuV/m", "frequency_hz": "Hz", "tx_power_dbm": "dBm",
+    "field_config.frequency_hz": "Hz", "field_config.tx_power_dbm": "dBm",
+    "field_config.tx_antenna.orientation": "rad (about z, y, x; the command line's --tx-orientation is in deg)",
+    "field_config.rx_antenna.orientation": "rad (about z, y, x; the command line's --rx-orientation is in deg)",
+}
+"""The unit of each number of ``paths --json``, written under its ``units`` key: the key
+is the field's name, with its parents' names before a dot (``paths.a`` for the ``a`` of
+each path)."""
 
 
 def run_settings(options, field_cfg) -> dict:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from wavepaths import TraceOptions, WavepathsError, load_scene, trace
-from wavepaths.coverage import CoverageMap, CoverageOptions, PlanarGrid, coverage
+from wavepaths.coverage import CoverageMap, CoverageOptions, MeshGrid, PlanarGrid, coverage
 from wavepaths.coverage.plot import plane_axes, plot_coverage
 from wavepaths.em.antennas import Antenna
 from wavepaths.fields import FieldConfig, compute_fields
@@ -177,6 +177,25 @@ def test_a_map_file_without_field_sums_reads_the_field_strength_only_for_an_isot
                 loaded.field_strength_dbuv_m()
         again = CoverageMap.load(cmap.save(str(tmp_path / "new.npz")))
         np.testing.assert_array_equal(again.field_strength_dbuv_m(), cmap.field_strength_dbuv_m())
+
+
+def test_a_map_file_gives_the_unit_of_every_array_and_setting(tmp_path):
+    import json
+
+    scene = load_scene("street_canyon")
+    verts = np.array([[-20.0, -8, 1.5], [20, -8, 1.5], [20, 8, 1.5], [-20, 8, 1.5]])
+    grids = (PlanarGrid(center=[0.3, 0.7], size=[40, 16], cell_size=4.0, height=1.5),
+             MeshGrid(verts, np.array([[0, 1, 2], [0, 2, 3]])))
+    for i, grid in enumerate(grids):
+        cmap = coverage(scene, [[-10, 0, 10]], grid, NO_DIFFRACTION, settings=IN_PROCESS)
+        with np.load(cmap.save(str(tmp_path / f"map{i}.npz"))) as data:
+            meta = json.loads(str(data["metadata"]))
+            arrays = set(data.files) - {"metadata"}
+        units = meta["units"]
+        assert arrays <= set(units), f"arrays without a unit: {sorted(arrays - set(units))}"
+        for key in ("frequency_hz", "tx_power_dbm", "elapsed_s", "timings"):
+            assert key in meta and key in units
+        assert units["frequency_hz"] == "Hz" and units["cell_centers"] == "m"
 
 
 def test_cli_field_strength_with_a_directive_antenna(tmp_path):

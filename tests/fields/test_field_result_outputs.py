@@ -161,6 +161,36 @@ def test_paths_json_names_the_objects_and_gives_the_angles():
     assert ground["arrival_deg"]["zenith"] == pytest.approx(90 + dive, abs=1e-9)
 
 
+def test_paths_json_says_what_a_holds_and_its_units_add_up():
+    """``paths --json`` names the unit of its numbers (``units``), and what it says of ``a``
+    holds: the receiver's coherent total is ``|sum a exp(-j 2 pi f tau)|^2`` (``a`` without
+    the carrier phase), its power sum ``sum |a|^2``, and ``gain_db`` is ``20 log10 |a|``. On
+    the street canyon with reflections and diffraction, several paths of different delays."""
+    r = run_paths("street_canyon", "--tx", -60, 0.5, 10, "--rx", 20, 3, 1.5, "--max-reflections", 1,
+                  "--tx-orientation", 30, 0, 0, "--json")
+    assert r.returncode == 0, r.stderr
+    out = strict_json(r.stdout)
+    units = out["units"]
+    assert "carrier phase" in units["paths.a"] and units["paths.delay_s"] == "s"
+    assert units["field_config.tx_antenna.orientation"].startswith("rad")
+    assert out["field_config"]["tx_antenna"]["orientation"][0] == pytest.approx(np.radians(30))
+    paths, rec = out["paths"], out["receivers"][0]
+    assert len(paths) >= 4 and len({round(p["delay_s"], 12) for p in paths}) >= 4
+    a = np.array([complex(*p["a"]) for p in paths])
+    tau = np.array([p["delay_s"] for p in paths])
+    coherent = np.abs(np.sum(a * np.exp(-2j * np.pi * out["frequency_hz"] * tau))) ** 2
+    assert 10 * np.log10(coherent) == pytest.approx(rec["path_gain_db"], abs=1e-9)
+    assert 10 * np.log10(np.sum(np.abs(a) ** 2)) == pytest.approx(rec["path_gain_incoherent_db"], abs=1e-9)
+    assert [p["gain_db"] for p in paths] == pytest.approx(list(20 * np.log10(np.abs(a))), abs=1e-9)
+    # every key the file holds a unit for exists in it
+    for key in units:
+        node = out
+        for part in key.split("."):
+            node = node[0] if isinstance(node, list) else node
+            assert part in node, key
+            node = node[part]
+
+
 # ---- strict JSON --------------------------------------------------------------------------
 def test_paths_json_is_strict_json_when_no_path_arrives():
     r = run_paths("half_plane", "--tx", -10, 5, -5, "--rx", 10, -5, -60, "--max-reflections", 0, "--no-diffraction",

@@ -40,6 +40,21 @@ from .grid import Grid, MeshGrid, PlanarGrid
 MECHANISMS = ("los", "reflection", "diffraction")
 Mechanism = Literal["los", "reflection", "diffraction"]
 FORMAT_VERSION = 1
+NPZ_UNITS = {
+    "path_gain_db": "dB", "received_power_dbm": "dBm", "field_strength_dbuv_m": "dBuV/m",
+    "best_server": "index into tx_positions (-1: inside an object or no path)", "cell_centers": "m", "inside": "bool",
+    "path_gain_db_per_tx": "dB", "mechanism_gain_db": "dB (power sum)", "tx_positions": "m",
+    "a_total": "1 (complex amplitude, unit transmit power, carrier phase exp(-j 2 pi f tau) included)",
+    "a_sum": "1 (complex amplitude, unit transmit power, carrier phase included)",
+    "power_sum": "1 (sum of |a|^2, unit transmit power)", "num_paths": "count",
+    "field_total": "1 (field 3-vector normalised like a, carrier phase included; "
+                   "|e| = lambda / 4 pi d in free space)",
+    "field_power_sum": "1 (sum of |e|^2)", "mesh_vertices": "m", "mesh_faces": "index into mesh_vertices",
+    "frequency_hz": "Hz", "tx_power_dbm": "dBm", "elapsed_s": "s", "timings": "s",
+}
+"""The unit of each array of a map file (:meth:`CoverageMap.save`) and of its settings, kept
+under ``metadata["units"]``: SI units, dB only in names ending ``_db``, ``_dbm``,
+``_dbuv_m``; ``1`` a dimensionless amplitude normalised like Sionna RT's ``Paths.a``."""
 SPEED_OF_LIGHT = 299_792_458.0
 
 
@@ -308,8 +323,7 @@ class CoverageMap:
             "timings": self.timings,
             "stats": {k: int(v) for k, v in self.stats.items()},
             "mechanisms": list(MECHANISMS),
-            "units": {"path_gain_db": "dB", "received_power_dbm": "dBm", "field_strength_dbuv_m": "dBuV/m",
-                      "cell_centers": "m"},
+            "units": NPZ_UNITS,
         })
         arrays = {
             "path_gain_db": self.path_gain_db(),
