@@ -329,6 +329,25 @@ def test_prune_db_prunes_diffraction_only_with_an_explicit_frequency(canyon, can
     assert np.all(pruned.power_sum[..., ok] <= canyon_map.power_sum[..., ok] * (1 + 1e-9))
 
 
+def test_prune_db_warns_where_its_diffraction_bound_does_not_hold(canyon):
+    """The diffraction bound of prune_db holds at prune_frequency_hz and above, for the UTD:
+    a map at a lower frequency, or with Keller's GTD, is warned about; at or above it, or
+    without diffracted pruning, nothing is said (warnings are errors in this suite)."""
+    from wavepaths.scene import WavepathsWarning
+
+    tx = [[-60, 0, 10]]
+    grid = PlanarGrid(center=[-37.3, 2.2], size=[14, 10], cell_size=[7, 5], height=1.5)
+    pruning = TraceOptions(max_reflections=1, prune_db=15.0, prune_frequency_hz=3.5e9)
+    with pytest.warns(WavepathsWarning, match="above the map's frequency"):
+        coverage(canyon, tx, grid, pruning, fields=FieldConfig(2.4e9), settings=IN_PROCESS)
+    with pytest.warns(WavepathsWarning, match="'gtd'"):
+        coverage(canyon, tx, grid, pruning, fields=FieldConfig(3.5e9, model="gtd"), settings=IN_PROCESS)
+    for options, cfg in ((pruning, FieldConfig(3.5e9)), (pruning, FieldConfig(9.5e9)),
+                         (pruning.with_(prune_frequency_hz=None), FieldConfig(2.4e9)),
+                         (pruning.with_(diffraction=False), FieldConfig(3.5e9, model="gtd"))):
+        coverage(canyon, tx, grid, options, fields=cfg, settings=IN_PROCESS)
+
+
 @pytest.mark.parametrize("antenna", ["iso", "tr38901"])
 def test_tolerance_db_changes_no_cells_power_sum_by_more_than_the_tolerance(canyon, antenna):
     """tolerance_db drops diffracted contributions (fewer diffracted paths) and every cell's

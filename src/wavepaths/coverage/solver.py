@@ -327,6 +327,29 @@ def _cached(scene: "Scene", key: str, make):
     return cache[key]
 
 
+def _warn_unbounded_pruning(opts: TraceOptions, cfg: FieldConfig) -> None:
+    """A :class:`~wavepaths.scene.WavepathsWarning` when ``prune_db`` prunes diffracted paths
+    (``prune_frequency_hz`` given) by a bound that does not hold for this map's fields: the UTD
+    bound holds at ``prune_frequency_hz`` and above, and not for Keller's GTD, whose
+    coefficient diverges at the boundaries (:attr:`TraceOptions.prune_db`). Only the map knows
+    both: :func:`wavepaths.trace` has no fields, :func:`wavepaths.compute_fields` no options."""
+    import warnings
+
+    from ..scene import WavepathsWarning
+
+    if opts.prune_db is None or opts.prune_frequency_hz is None or not opts.diffraction:
+        return
+    if cfg.model == "gtd":
+        warnings.warn(f"`prune_db` prunes diffracted paths by the UTD's bound, which does not hold for the "
+                      f"fields' model 'gtd': dropped paths may exceed -{opts.prune_db:g} dB", WavepathsWarning,
+                      stacklevel=3)
+    elif opts.prune_frequency_hz > cfg.frequency_hz:
+        warnings.warn(f"`prune_frequency_hz` ({opts.prune_frequency_hz:g} Hz) is above the map's frequency "
+                      f"({cfg.frequency_hz:g} Hz): the diffraction bound of `prune_db` holds only at that "
+                      f"frequency and above, so dropped paths may exceed -{opts.prune_db:g} dB", WavepathsWarning,
+                      stacklevel=3)
+
+
 def coverage(
     scene: Scene,
     tx,
@@ -386,6 +409,7 @@ def coverage(
             raise WavepathsError(f"`tolerance_db` needs the UTD model (its bound does not hold for {cfg.model!r})")
         # the diffraction bound needs the frequency, which the map knows (so does prune_db then)
         opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
+    _warn_unbounded_pruning(opts, cfg)
     tx = check_positions("tx", tx)
     cfg.check_materials(scene)  # fail before tracing, not in a worker
     m = len(tx)

@@ -110,7 +110,8 @@ class TraceOptions:
         20 dB down is often all that reaches a shadowed cell (use ``tolerance_db`` there);
         :func:`wavepaths.coverage.coverage` sets it to the map's frequency with
         ``tolerance_db``, whose bound needs it (a ``prune_db`` given with it then prunes
-        diffracted paths too).
+        diffracted paths too). A map warns when ``prune_frequency_hz`` is above its
+        frequency or its model is ``"gtd"``, where the bound does not hold.
     tolerance_db : float or None
         Coverage maps only (:func:`wavepaths.coverage.coverage`; :func:`wavepaths.trace`
         refuses it, having no fields): per transmitter and cell, drop diffracted
