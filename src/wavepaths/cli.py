@@ -60,12 +60,49 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
                    help="material of a mesh file's triangles that name no known material (OBJ usemtl, glTF "
                         "materials named after ITU-R P.2040 materials are used): pec (default), absorber or an "
                         "ITU-R P.2040 name such as concrete")
+    p.add_argument("--replace-material", metavar="NAME=VALUE", action="append",
+                   help="replace the scene's material NAME (see `wavepaths info`) by VALUE: pec, absorber, an "
+                        "ITU-R P.2040 name, or EPS_R,SIGMA (relative permittivity, conductivity [S/m], at every "
+                        "frequency), e.g. for a frequency outside the ITU materials' range; repeat for several")
 
 
 def _scene(args):
-    from .scene import load_scene
+    from .scene import load_scene, with_materials
 
-    return load_scene(args.scene, up_axis=getattr(args, "up_axis", "auto"), material=getattr(args, "material", None))
+    scene = load_scene(args.scene, up_axis=getattr(args, "up_axis", "auto"), material=getattr(args, "material", None))
+    replace = getattr(args, "replace_material", None)
+    return with_materials(scene, material_replacements(replace, scene)) if replace else scene
+
+
+def material_replacements(items: list[str], scene) -> dict:
+    """The ``--replace-material NAME=VALUE`` flags as :func:`wavepaths.scene.with_materials`'
+    mapping: ``VALUE`` a material name (``pec``, ``absorber``, an ITU-R P.2040 name) or
+    ``EPS_R,SIGMA``, a frequency-independent material of relative permittivity ``EPS_R`` and
+    conductivity ``SIGMA`` [S/m], with the slab thickness of the material it replaces."""
+    from .em.materials import DEFAULT_THICKNESS_M, Material
+
+    thickness = {m.name: m.thickness_m for m in scene.materials}
+    out: dict = {}
+    for item in items:
+        name, sep, value = (x.strip() for x in item.partition("="))
+        if not sep or not name or not value:
+            raise WavepathsError(f"--replace-material must be NAME=VALUE (VALUE a material name or EPS_R,SIGMA), "
+                                 f"got {item!r}")
+        if name in out:
+            raise WavepathsError(f"--replace-material gives material {name!r} twice")
+        parts = value.split(",")
+        if len(parts) != 2:
+            out[name] = value  # a name: with_materials checks it
+            continue
+        try:
+            eps_r, sigma = (float(x) for x in parts)
+        except ValueError:
+            raise WavepathsError(f"--replace-material {item!r}: EPS_R,SIGMA must be two numbers") from None
+        try:
+            out[name] = Material(name, "custom", a=eps_r, c=sigma, thickness_m=thickness.get(name, DEFAULT_THICKNESS_M))
+        except WavepathsError as exc:
+            raise WavepathsError(f"--replace-material {item!r}: {exc}") from None
+    return out
 
 
 def _cmd_info(args) -> int:
@@ -448,7 +485,7 @@ def _prepare_out(args) -> str | None:
 
 # the API's names of settings whose flag is not the name with dashes
 _FLAG_OF = {"frequency_hz": "--frequency", "cell_size": "--cell", "tx_antenna": "--tx-antenna",
-            "rx_antenna": "--rx-antenna"}
+            "rx_antenna": "--rx-antenna", "replacements": "--replace-material"}
 
 
 def _in_flags(message: str, parser: argparse.ArgumentParser, command: str) -> str:

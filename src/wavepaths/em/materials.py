@@ -249,8 +249,10 @@ def relative_permittivity(
             f"frequency {frequency_hz!r} Hz is outside the valid range of material "
             f"{material.name!r}: [{material.f_min_hz:g}, {material.f_max_hz:g}] Hz (ITU-R P.2040 Table 3 gives "
             f"its parameters there only); give the objects made of it a material valid at this frequency: "
-            f"Material(name, 'custom', a=relative permittivity, c=conductivity [S/m]), in the scene file or "
-            f"through load_scene(..., materials=...) for a mesh file"
+            f"Material(name, 'custom', a=relative permittivity, c=conductivity [S/m]), in the scene file, "
+            f"through load_scene(..., materials=...) for a mesh file, or wavepaths.scene.with_materials(scene, "
+            f"{{{material.name!r}: material}}) (on the command line: --replace-material "
+            f"{material.name}=EPS_R,SIGMA)"
         )
     if material.kind == "custom":
         eps_r = np.full_like(f, material.a)

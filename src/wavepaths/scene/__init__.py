@@ -3,7 +3,7 @@
 from .builtin import BUILTIN_SCENES
 from .loaders import load_scene
 from .mitsuba_writer import write_mitsuba_xml
-from .model import Scene, WavepathsWarning, build_scene, transformed
+from .model import Scene, WavepathsWarning, build_scene, transformed, with_materials
 from .tolerances import SceneTolerances
 
 __all__ = [
@@ -14,5 +14,6 @@ __all__ = [
     "build_scene",
     "load_scene",
     "transformed",
+    "with_materials",
     "write_mitsuba_xml",
 ]

@@ -15,13 +15,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..em.materials import Material
-from ..errors import SceneError
+from ..errors import SceneError, WavepathsError
 from .mesh_topology import (EdgeIncidence, area_order, coplanar_components, edge_incidence, largest_per_label,
                             triangle_normals)
 from .tolerances import SceneTolerances
 from .weld import degenerate_triangles, weld_vertices
 
 if TYPE_CHECKING:  # pragma: no cover
+    from collections.abc import Mapping
+
     from ..raycast import RayCaster
     from ..search.mirror_visibility import PolygonHulls
     from ..topology.dihedra import Dihedra
@@ -386,3 +388,52 @@ def transformed(scene: Scene, rotation: np.ndarray | None = None, translation: n
         source=scene.source,
         tolerances=scene.tolerances,
     )
+
+
+def with_materials(scene: Scene, replacements: Mapping[str, Material | str]) -> Scene:
+    """The same scene with some of its materials replaced, by name.
+
+    For a scene whose materials are not valid at the frequency wanted (the ITU-R P.2040
+    materials of the built-in scenes hold between 1 and 10 GHz, most of them), or to try
+    another material, without editing the scene file. The geometry, the objects and which
+    triangles share a material are unchanged; only the replaced materials' parameters are.
+
+    Parameters
+    ----------
+    scene : Scene
+    replacements : mapping of str to Material or str
+        The name of a material of the scene (``scene.materials[i].name``) to its new
+        material: a :class:`~wavepaths.em.materials.Material`, or a name
+        (``"pec"``, ``"absorber"``, an ITU-R P.2040 name). A named replacement keeps the
+        replaced material's slab thickness; a :class:`Material` brings its own.
+
+    Returns
+    -------
+    Scene
+        A new scene (its dihedra and ray caster are built again when first used).
+
+    Raises
+    ------
+    WavepathsError
+        A name that is no material of the scene (the message lists the scene's), or a value
+        that is no material.
+    """
+    import dataclasses
+
+    from ..em.materials import as_material
+
+    names = [m.name for m in scene.materials]
+    unknown = [k for k in replacements if k not in names]
+    if unknown:
+        raise WavepathsError(f"`replacements` names {unknown}, which are no materials of the scene "
+                             f"{scene.source!r}; its materials: {names}")
+    new = []
+    for m in scene.materials:
+        if m.name not in replacements:
+            new.append(m)
+            continue
+        value = replacements[m.name]
+        rep = as_material(value, f"the replacement of material {m.name!r}")
+        new.append(rep if isinstance(value, Material) else dataclasses.replace(rep, thickness_m=m.thickness_m))
+    return dataclasses.replace(scene, materials=tuple(new))
+
