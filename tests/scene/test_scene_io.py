@@ -38,6 +38,27 @@ def test_mitsuba_round_trip_keeps_geometry_and_materials(tmp_path, name):
     assert names <= {m.name for m in r.materials} | {"metal"}
 
 
+def test_writing_over_a_scene_removes_its_meshes_that_the_new_scene_does_not_use(tmp_path):
+    """A folder written twice holds the second scene's meshes only: the street canyon (many
+    objects) then the half-plane (one) leaves one PLY in meshes/, and the XML reads back as
+    the half-plane. Files the old XML did not name (a user's own, another XML's) stay."""
+    xml = str(tmp_path / "scene.xml")
+    first = write_mitsuba_xml(load_scene("street_canyon"), xml)
+    mesh_dir = tmp_path / "meshes"
+    shutil.copy(first[1], mesh_dir / "mine.ply")
+    other = write_mitsuba_xml(load_scene("box_on_ground"), str(tmp_path / "other.xml"), mesh_dir="others")
+    second = write_mitsuba_xml(load_scene("half_plane"), xml)
+    left = sorted(p.name for p in mesh_dir.iterdir())
+    assert left == sorted([os.path.basename(f) for f in second[1:]] + ["mine.ply"])
+    assert len(first) > len(second) and all(os.path.exists(f) for f in other)
+    again = load_scene(xml)
+    assert again.num_triangles == load_scene("half_plane").num_triangles
+    # a file at that path that is no scene leaves the folder alone
+    (tmp_path / "notes.xml").write_text("<notes><shape><string name='filename' value='meshes/mine.ply'/></shape></notes>")
+    write_mitsuba_xml(load_scene("half_plane"), str(tmp_path / "notes.xml"))
+    assert (mesh_dir / "mine.ply").exists()
+
+
 def test_xml_transform_and_inline_material(tmp_path):
     (tmp_path / "m").mkdir()
     with open(tmp_path / "m" / "q.obj", "w") as f:

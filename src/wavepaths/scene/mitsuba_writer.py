@@ -108,10 +108,12 @@ def write_mitsuba_xml(scene, path: str, mesh_dir: str = "meshes") -> list[str]:
     Returns
     -------
     list of str
-        The files written (the XML file first).
+        The files written (the XML file first). Writing over an XML file of a scene removes
+        the mesh files in ``mesh_dir`` that it used and this scene does not (no others).
     """
     out_dir = os.path.dirname(os.path.abspath(path))
     os.makedirs(os.path.join(out_dir, mesh_dir), exist_ok=True)
+    before = _meshes_of(path, os.path.join(out_dir, mesh_dir))
     root = ET.Element("scene", version="2.1.0")
     taken_ids: set[str] = set()
     ids = []
@@ -156,5 +158,32 @@ def write_mitsuba_xml(scene, path: str, mesh_dir: str = "meshes") -> list[str]:
         ET.SubElement(shape, "ref", id=ids[m], name="bsdf")
     ET.indent(root)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    for stale in before - {os.path.realpath(w) for w in written}:
+        os.remove(stale)  # a mesh of the file this one replaces, which no shape uses now
     written.insert(0, path)
     return written
+
+
+def _meshes_of(path: str, mesh_folder: str) -> set[str]:
+    """The mesh files in ``mesh_folder`` that the XML file at ``path`` uses, when it exists and
+    is a scene: :func:`write_mitsuba_xml` removes those it does not write again, so that a
+    folder written twice holds only the second scene's meshes. Files outside the folder, and
+    any file the old XML does not name, are never touched."""
+    if not os.path.isfile(path):
+        return set()
+    try:
+        old = ET.parse(path).getroot()
+    except (ET.ParseError, OSError, UnicodeDecodeError):
+        return set()
+    if old.tag != "scene":
+        return set()
+    folder = os.path.realpath(mesh_folder)
+    base = os.path.dirname(os.path.abspath(path))
+    found = set()
+    for shape in old.iter("shape"):
+        for item in shape.findall("string"):
+            if item.get("name") == "filename" and item.get("value"):
+                f = os.path.realpath(os.path.join(base, item.get("value")))
+                if os.path.dirname(f) == folder and f.endswith(".ply") and os.path.isfile(f):
+                    found.add(f)
+    return found
