@@ -48,6 +48,27 @@ def test_point_search_benchmark_figures():
     assert r["point_search_ns"] > 0 and r["point_search_speedup"] > 0
 
 
+def test_the_compiled_searches_find_the_numpy_searches_points():
+    """Benchmark 1's compiled pair (numba) solves the same pairs as the numpy versions: the
+    closed form to 1e-12 m, the Newton search to its 1e-11 m stopping step, the same
+    on-edge verdicts, and the benchmark reports their ratio."""
+    pytest.importorskip("numba")
+    from wavepaths.bench.point_search_compiled import run_compiled
+
+    inst = random_instances(2_000, seed=5)
+    t, on = closed_form(inst)
+    tn_np, on_np, _ = newton_reduced(inst)
+    (t_c, on_c), (t_n, on_n, iters) = run_compiled(inst)
+    assert (on_c == on).all() and (on_n == on).all() and (on_np == on).all()
+    assert np.abs(t_c[on] - t[on]).max() < 1e-12
+    assert np.abs(t_n[on] - t[on]).max() < 2e-11 and iters > 3
+    assert np.abs(t_n[on] - tn_np[on]).max() < 2e-11
+    r = run_point_search(n_pairs=200, repeats=2, rounds=2, numerical_repeats=2, scalar_pairs=20)
+    both = r["both_compiled"]
+    assert both["newton_agreement_with_closed_form"]["on_edge_disagreements"] == 0
+    assert r["point_search_speedup_compiled"] == both["speedup"] > 0
+
+
 def test_run_bench_writes_json(tmp_path):
     summary = run_bench(str(tmp_path), quick=True, only=["point_search"], profile=False, progress=lambda m: None)
     data = json.loads((tmp_path / "bench.json").read_text())

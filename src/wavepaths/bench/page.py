@@ -113,6 +113,16 @@ def _point_search_section(ps: dict, figures: dict) -> list[str]:
                      ag.get("on_edge_disagreements")])
     parts.append(_table(rows, ["method", "ns/point (median)", "ns/point (min)", "iterations",
                                "closed form faster by", "max |P - P_closed| [m]", "on-edge disagreements"]))
+    both = ps.get("both_compiled")
+    if both:
+        parts.append("<p>Both searches compiled (numba loops over the pairs, the same formulas and stopping "
+                     "step): the algorithms' own ratio, without numpy's array passes per Newton iteration.</p>")
+        ag = both["newton_agreement_with_closed_form"]
+        parts.append(_table([["closed form, compiled", both["closed_form_ns_per_point"], None, None, None],
+                             ["Newton (reduced), compiled", both["newton_reduced_ns_per_point"],
+                              both["newton_iterations"], both["speedup"], ag["max_point_distance_m"]]],
+                            ["method", "ns/point (median)", "iterations", "closed form faster by",
+                             "max |P - P_closed| [m]"]))
     sc = ps["scalar_per_call"]
     parts.append(_table([["closed form, pure Python", sc["closed_form_python_ns"]],
                          ["Newton (reduced), pure Python", sc["newton_python_ns"]],

@@ -314,6 +314,34 @@ def _agreement(inst: EdgeInstances, t_ref: np.ndarray, on_ref: np.ndarray, t: np
     }
 
 
+def _compiled_contenders(inst: EdgeInstances, per_round: int, num_per_round: int) -> dict | None:
+    """The closed form and the reduced Newton search as compiled loops
+    (:mod:`wavepaths.bench.point_search_compiled`), warmed up, for the same interleaved
+    rounds: ``{"contenders", "calls", "results"}``, or None without numba."""
+    from ..search import kernels
+
+    if not kernels.available():
+        return None
+    from .point_search_compiled import closed_form_compiled, newton_reduced_compiled, run_compiled
+
+    results = run_compiled(inst)  # compiles (or loads the cache) before any timing
+    n = len(inst)
+    t, on = np.empty(n), np.empty(n, dtype=np.bool_)
+    args = (inst.e, inst.r, inst.origin, inst.direction, inst.length)
+
+    def cf():
+        for _ in range(per_round):
+            closed_form_compiled(*args, t, on)
+
+    def newton():
+        for _ in range(num_per_round):
+            newton_reduced_compiled(*args, 1e-11, 100, t, on)
+
+    return {"contenders": {"closed_form_compiled": cf, "newton_reduced_compiled": newton},
+            "calls": {"closed_form_compiled": per_round, "newton_reduced_compiled": num_per_round},
+            "results": results}
+
+
 def _scalar_ns(fn, inst: EdgeInstances, count: int, repeats: int = 3) -> float:
     """Median over ``repeats`` of the mean time of one scalar call [ns]."""
     rows = [(inst.e[i].tolist(), inst.r[i].tolist(), inst.origin[i].tolist(), inst.direction[i].tolist(),
@@ -376,8 +404,12 @@ def run_point_search(n_pairs: int = 10_000, repeats: int = 1_000, rounds: int = 
 
     contenders = {"closed_form": loop(closed_form, per_round), "engine_step": engine_loop}
     contenders.update({name: loop(fn, num_per_round) for name, fn in NUMERICAL.items()})
-    times = interleaved(contenders, rounds)
     calls = {"closed_form": per_round, "engine_step": per_round, **{name: num_per_round for name in NUMERICAL}}
+    compiled = _compiled_contenders(inst, per_round, num_per_round)
+    if compiled is not None:
+        contenders.update(compiled["contenders"])
+        calls.update(compiled["calls"])
+    times = interleaved(contenders, rounds)
     ns = {name: [t / calls[name] / n_pairs * 1e9 for t in r.times_s] for name, r in times.items()}
     med = {name: float(np.median(v)) for name, v in ns.items()}
     fastest = min(NUMERICAL, key=lambda k: med[k])
@@ -396,6 +428,17 @@ def run_point_search(n_pairs: int = 10_000, repeats: int = 1_000, rounds: int = 
             entry["speedup_of_closed_form"] = med[name] / med["closed_form"]
         methods[name] = entry
 
+    both_compiled = None
+    if compiled is not None:
+        (t_c, on_c), (t_n, on_n, iters_c) = compiled["results"]
+        both_compiled = {
+            "closed_form_ns_per_point": med["closed_form_compiled"],
+            "newton_reduced_ns_per_point": med["newton_reduced_compiled"],
+            "speedup": med["newton_reduced_compiled"] / med["closed_form_compiled"],
+            "newton_iterations": iters_c,
+            "closed_form_agreement_with_numpy": _agreement(inst, t_cf, on_cf, t_c, on_c),
+            "newton_agreement_with_closed_form": _agreement(inst, t_cf, on_cf, t_n, on_n),
+        }
     scalar_pairs = min(scalar_pairs, n_pairs)
     scalar = {
         "closed_form_python_ns": _scalar_ns(closed_form_scalar, inst, scalar_pairs),
@@ -416,6 +459,9 @@ def run_point_search(n_pairs: int = 10_000, repeats: int = 1_000, rounds: int = 
         "point_search_ns": med["closed_form"],
         "point_search_speedup": med[fastest] / med["closed_form"],
         "engine_candidate_ns": med["engine_step"],
+        # both searches as compiled loops (numba; None without it): the algorithms' own ratio
+        "both_compiled": both_compiled,
+        "point_search_speedup_compiled": both_compiled["speedup"] if both_compiled else None,
         "point_search_max_point_distance_m": methods[fastest]["agreement_with_closed_form"]["max_point_distance_m"],
         "scalar_per_call": scalar,
         "seed": {"ns_per_point": SEED_NS_PER_POINT, "speedup": list(SEED_SPEEDUP),

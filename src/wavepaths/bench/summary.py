@@ -79,6 +79,7 @@ def headline(results: dict) -> dict:
     head = {
         "point_search_ns": ps.get("point_search_ns"),
         "point_search_speedup": ps.get("point_search_speedup"),
+        "point_search_speedup_compiled": ps.get("point_search_speedup_compiled"),
         "engine_candidate_ns": ps.get("engine_candidate_ns"),
         "sionna_paths_time_ratio": sp.get("sionna_paths_time_ratio"),
         "diffraction_cost_ratio": dc.get("diffraction_cost_ratio"),
