@@ -69,6 +69,20 @@ def test_the_compiled_searches_find_the_numpy_searches_points():
     assert r["point_search_speedup_compiled"] == both["speedup"] > 0
 
 
+def test_scaling_fit_separates_the_fixed_cost_from_the_linear_part():
+    """A fixed cost plus a linear part is recovered exactly, where one power law over it reads
+    low; the local exponent of a power law is its exponent; missing points are skipped."""
+    from wavepaths.bench.scaling import fixed_plus_linear, log_slope
+
+    n = [10, 30, 100, 300, 1000, 3000]
+    t = [0.01 + 5e-5 * x for x in n]
+    fit = fixed_plus_linear(n, t)
+    assert fit["fixed_s"] == pytest.approx(0.01, rel=1e-9) and fit["per_item_s"] == pytest.approx(5e-5, rel=1e-9)
+    assert log_slope(n, t) < 0.6 < fit["local_exponent"] < 1.0
+    assert fixed_plus_linear(n, [2.0 * x**1.3 for x in n])["local_exponent"] == pytest.approx(1.3, rel=1e-12)
+    assert fixed_plus_linear([10, 20, 30], [None, 1.0, None]) is None
+
+
 def test_run_bench_writes_json(tmp_path):
     summary = run_bench(str(tmp_path), quick=True, only=["point_search"], profile=False, progress=lambda m: None)
     data = json.loads((tmp_path / "bench.json").read_text())

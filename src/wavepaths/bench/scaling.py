@@ -141,6 +141,26 @@ def log_slope(x, y) -> float | None:
     return float(np.polyfit(np.log(x[ok]), np.log(y[ok]), 1)[0])
 
 
+def fixed_plus_linear(x, y) -> dict | None:
+    """Least-squares ``y = a + b x`` over the finite points, with the local exponent between
+    the two largest ``x`` (``log(y2 / y1) / log(x2 / x1)``): one power law fitted over a
+    fixed per-query cost reads low, so the report gives both (``docs/benchmarks/bench.json``:
+    n^0.48 over 10-3,000 receivers, where this fit gives 9.8 ms plus 53 us per receiver and
+    the local exponent is 0.92).
+
+    Returns ``{"fixed_s", "per_item_s", "local_exponent"}`` (None with fewer than 2 points)."""
+    x = np.asarray([np.nan if v is None else v for v in x], dtype=float)
+    y = np.asarray([np.nan if v is None else v for v in y], dtype=float)
+    ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+    if ok.sum() < 2:
+        return None
+    x, y = x[ok], y[ok]
+    b, a = np.polyfit(x, y, 1)
+    i, j = np.argsort(x)[-2:]
+    return {"fixed_s": float(a), "per_item_s": float(b),
+            "local_exponent": float(np.log(y[j] / y[i]) / np.log(x[j] / x[i])) if x[j] > x[i] else None}
+
+
 def run_scaling(out_dir: str, quick: bool = False, timeout_s: float = 300.0, memory_limit: int = 8 << 30,
                 progress=print) -> dict:
     """Benchmark 4."""
@@ -156,7 +176,9 @@ def run_scaling(out_dir: str, quick: bool = False, timeout_s: float = 300.0, mem
     for n in counts:
         rows.append(_point(xml, STREET_CANYON_TX, street_canyon_receivers(n), default, timeout_s, memory_limit))
     out["receivers"] = {"scene": "simple_street_canyon", "options": default, "points": rows,
-                        "time_exponent": log_slope([r["num_rx"] for r in rows], [r.get("time_s") for r in rows])}
+                        "time_exponent": log_slope([r["num_rx"] for r in rows], [r.get("time_s") for r in rows]),
+                        "time_fixed_plus_linear": fixed_plus_linear([r["num_rx"] for r in rows],
+                                                                    [r.get("time_s") for r in rows])}
 
     progress("benchmark 4: reflection order")
     rx = street_canyon_receivers(100)
@@ -221,7 +243,13 @@ def _analysis(out: dict) -> str:
     parts = []
     e = out["receivers"]["time_exponent"]
     if e is not None:
-        parts.append(f"Receivers: time grows as n^{e:.2f} (fixed per-query costs at small n, linear beyond).")
+        fit = out["receivers"].get("time_fixed_plus_linear")
+        if fit and fit["local_exponent"] is not None:
+            parts.append(f"Receivers: one power law fits n^{e:.2f}, but the time is a fixed cost plus a linear part "
+                         f"({1e3 * fit['fixed_s']:.1f} ms + {1e6 * fit['per_item_s']:.1f} us per receiver); between "
+                         f"the two largest counts it grows as n^{fit['local_exponent']:.2f}.")
+        else:
+            parts.append(f"Receivers: time grows as n^{e:.2f} (fixed per-query costs at small n, linear beyond).")
     refl = [r for r in out["order"]["points"] if not r.get("options", {}).get("diffraction") and "time_s" in r]
     if len(refl) >= 3:
         growth = [b["time_s"] / a["time_s"] for a, b in zip(refl[1:], refl[2:])]
