@@ -164,3 +164,37 @@ def test_visibility_survives_a_move_to_1e6_metres(rng):
     np.testing.assert_array_equal(
         EmbreeRayCaster(s).occluded(a, b), EmbreeRayCaster(moved).occluded(a + shift, b + shift)
     )
+
+
+# ---- build_scene and SceneTolerances check their arguments ---------------------------------
+def test_build_scene_refuses_malformed_arrays_and_ids_out_of_range():
+    """A (6, 2) ``vertices`` array was read as four points, float indices were truncated and
+    ids out of range failed later in the search; each is refused now, naming the argument."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    ok = build_scene(v, t, [0, 0], [0, 0], ["o"], [PEC])
+    assert ok.num_triangles == 2
+    cases = [
+        ((v.reshape(6, 2), t, [0, 0], [0, 0], ["o"], [PEC]), r"`vertices` must have shape \(n, 3\), got \(6, 2\)"),
+        ((v, t + 0.5, [0, 0], [0, 0], ["o"], [PEC]), "`triangles` must hold integer indices"),
+        ((v, t, [0, 0], [0, 5], ["o"], [PEC]), r"`triangle_material` must index `materials` \(0..0\), got 0..5"),
+        ((v, t, [0, 3], [0, 0], ["o"], [PEC]), r"`triangle_object` must index `object_names` \(0..0\), got 0..3"),
+        ((v, t, [0], [0, 0], ["o"], [PEC]), r"`triangle_object` must have one entry per triangle \(2\), got 1"),
+        ((v, t + 2, [0, 0], [0, 0], ["o"], [PEC]), r"`triangles` must index `vertices` \(0..3\), got 2..5"),
+        ((v, t, [0, 0], [0, 0], ["o"], ["pec"]), "`materials` must be Material objects"),
+    ]
+    for args, message in cases:
+        with pytest.raises(SceneError, match=message):
+            build_scene(*args)
+    assert build_scene(v, t.astype(float), [0.0, 0.0], [0, 0], ["o"], [PEC]).num_triangles == 2  # whole floats
+
+
+@pytest.mark.parametrize("kwargs", [{"weld": float("nan")}, {"coplanar_angle": -1.0}, {"ray_offset": -1e-6},
+                                    {"flat_angle": 2.0}, {"weld": "1e-6"}, {"plane_distance": True}])
+def test_scene_tolerances_must_be_finite_and_in_range(kwargs):
+    from wavepaths.errors import WavepathsError
+    from wavepaths.scene import SceneTolerances
+
+    name = next(iter(kwargs))
+    with pytest.raises(WavepathsError, match=f"`{name}` must be a finite number in"):
+        SceneTolerances(**kwargs)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wavepaths.em.utd_terms import Array, WedgeCoefficients, _check_floor, _prepare
+from wavepaths.em.utd_terms import SIN_BETA_0_FLOOR, Array, WedgeCoefficients, _check_floor, _prepare
 
 __all__ = [
     "keller_coefficients",
@@ -30,7 +30,7 @@ __all__ = [
 
 def keller_coefficients(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
-    *, sin_beta_0_floor: float = 1e-6, denominator_floor: float = 1e-12,
+    *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR, denominator_floor: float = 1e-12,
 ) -> WedgeCoefficients:
     """Keller's GTD PEC wedge coefficient (JOSA 52:116, 1962), the F -> 1 limit of KP.
 

@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 
 from wavepaths.em.fresnel import reflection_coefficients
 from wavepaths.em.materials import Material
-from wavepaths.em.utd_terms import Array, CArray, _check_floor, _check_r, _four_terms, _prepare
+from wavepaths.em.utd_terms import SIN_BETA_0_FLOOR, Array, CArray, _check_floor, _check_r, _four_terms, _prepare
 from wavepaths.em.wedge_faces import FaceCoefficients
 from wavepaths.errors import WavepathsError
 
@@ -77,7 +77,7 @@ def _face_reflection_matrix(
 def sionna_compat_coefficients(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
     L: ArrayLike, r0_te: ArrayLike = -1.0, r0_tm: ArrayLike = 1.0, rn_te: ArrayLike = -1.0,
-    rn_tm: ArrayLike = 1.0, *, sin_beta_0_floor: float = 1e-6,
+    rn_tm: ArrayLike = 1.0, *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR,
 ) -> CArray:
     """Sionna RT 2.2's diffraction Jones matrix (``RadioMaterial._diffraction_matrix``).
 

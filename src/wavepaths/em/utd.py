@@ -47,6 +47,7 @@ from wavepaths.em.utd_terms import (
     BoundaryOffsets,
     CArray,
     WedgeCoefficients,
+    SIN_BETA_0_FLOOR,
     _check_floor,
     _check_r,
     _epsilons,
@@ -93,7 +94,7 @@ _MODELS: tuple[str, ...] = ("utd", "gtd", "sionna")
 def luebbers_coefficients(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
     L: ArrayLike, r0_s: ArrayLike, r0_h: ArrayLike, rn_s: ArrayLike, rn_h: ArrayLike,
-    *, sin_beta_0_floor: float = 1e-6,
+    *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR,
 ) -> WedgeCoefficients:
     """Luebbers (IEEE TAP 32(1):70-76, 1984) heuristic UTD coefficient, ITU-R P.526 wedge form.
 
@@ -141,7 +142,7 @@ def luebbers_coefficients(
 
 def kp_coefficients(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
-    L: ArrayLike, *, sin_beta_0_floor: float = 1e-6,
+    L: ArrayLike, *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR,
 ) -> WedgeCoefficients:
     """Kouyoumjian & Pathak (Proc. IEEE 62(11):1448-1461, 1974) PEC wedge coefficient.
 
@@ -163,7 +164,7 @@ def kp_coefficients(
 
 def diffraction_jones_matrices(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike, L: ArrayLike,
-    model: DiffractionModel, g0: ArrayLike, gn: ArrayLike, *, sin_beta_0_floor: float = 1e-6,
+    model: DiffractionModel, g0: ArrayLike, gn: ArrayLike, *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR,
     gtd_floor: float = 1e-12,
 ) -> CArray:
     """:func:`diffraction_jones` (``"utd"`` or ``"gtd"``) with the faces' reflections as 2x2
@@ -199,7 +200,7 @@ def diffraction_jones_matrices(
 
 def utd_magnitude_bound(
     phi: ArrayLike, phi_prime: ArrayLike, sin_beta_0: ArrayLike, n: ArrayLike, k: ArrayLike, L: ArrayLike,
-    *, sin_beta_0_floor: float = 1e-6,
+    *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR,
 ) -> Array:
     """An upper bound on ``max(|D_s|, |D_h|)`` of the UTD coefficient for passive faces.
 
@@ -255,7 +256,7 @@ def utd_magnitude_bound(
 def diffraction_jones(
     phi: ArrayLike, phi_prime: ArrayLike, beta_0: ArrayLike, n: ArrayLike, k: ArrayLike,
     L: ArrayLike, model: DiffractionModel, r0_s: ArrayLike = -1.0, r0_h: ArrayLike = 1.0,
-    rn_s: ArrayLike = -1.0, rn_h: ArrayLike = 1.0, *, sin_beta_0_floor: float = 1e-6,
+    rn_s: ArrayLike = -1.0, rn_h: ArrayLike = 1.0, *, sin_beta_0_floor: float = SIN_BETA_0_FLOOR,
     gtd_floor: float = 1e-12,
 ) -> CArray:
     """Edge diffraction Jones matrix ``(E_b0', E_phi')`` at the edge -> ``(E_b0, E_phi)``.

@@ -151,6 +151,12 @@ def _check_r(*rs: ArrayLike) -> list[CArray]:
     return out
 
 
+SIN_BETA_0_FLOOR = 1e-6
+"""The default floor of ``|sin beta_0|`` in the diffraction coefficients (grazing incidence
+along the edge, where they diverge as ``1 / sin beta_0``): a coefficient is at most about
+1e6 times its broadside value. The fields and the search's amplitude bounds use the same."""
+
+
 def _check_floor(value: float, name: str) -> None:
     if not (0.0 < value < 1.0):
         raise WavepathsError(f"`{name}` must lie in (0, 1), got {value!r}")

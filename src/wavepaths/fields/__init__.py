@@ -30,12 +30,46 @@ def compute_fields(scene: "Scene", paths: "Paths", config: FieldConfig | None = 
     Returns
     -------
     FieldResult
+
+    Raises
+    ------
+    WavepathsError
+        Arguments of the wrong type, or paths traced in another scene (their
+        ``scene_fingerprint``, or primitives that are no polygons or dihedra of ``scene``).
     """
-    cfg = config or FieldConfig()
+    cfg = FieldConfig() if config is None else config
+    check_field_arguments(scene, paths, cfg)
     a, e = coefficients_and_fields(scene, paths, cfg)
     _warn_near_field(paths, cfg)
     _warn_gtd_on_boundaries(paths, a, cfg)
     return FieldResult(paths, a, cfg.frequency_hz, cfg.tx_power_dbm, incident_field=e)
+
+
+def check_field_arguments(scene: "Scene", paths: "Paths", cfg: FieldConfig) -> None:
+    """The checks of :func:`compute_fields`: the types, and that ``paths`` belong to ``scene``
+    (fields of paths traced in another scene are numbers without meaning, and a review got
+    one 0.7 dB off with no error)."""
+    from ..errors import WavepathsError
+    from ..scene.model import Scene
+    from ..search.paths import InteractionType, Paths
+
+    for name, value, kind in (("scene", scene, Scene), ("paths", paths, Paths), ("config", cfg, FieldConfig)):
+        if not isinstance(value, kind):
+            raise WavepathsError(f"`{name}` must be a {kind.__name__}, got {type(value).__name__}")
+    if paths.scene_fingerprint and paths.scene_fingerprint != scene.geometry_fingerprint:
+        raise WavepathsError("`paths` were traced in another scene (or another version of this one) than `scene`")
+    if not len(paths):
+        return
+    refl = paths.interactions == InteractionType.REFLECTION
+    diff = paths.interactions == InteractionType.DIFFRACTION
+    bad = bool((refl & (paths.primitive >= scene.num_polygons)).any())
+    if not bad and diff.any():  # (the dihedra are built only for paths that diffract)
+        dih = scene.dihedra
+        bad = bool((diff & (paths.primitive >= len(dih.direction))).any() or
+                   (paths.wedge_faces >= len(dih.face_direction)).any())
+    if bad:
+        raise WavepathsError("`paths` name polygons or dihedra that `scene` does not have: they were traced in "
+                             "another scene")
 
 
 GTD_EXCESS_DB = 60.0  # a GTD path this far above free space at its length lies on a boundary

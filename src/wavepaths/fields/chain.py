@@ -39,6 +39,7 @@ from ..em.antennas import antenna_field_vectors
 from ..em.fresnel import reflection_coefficients
 from ..em.polarization import spherical_unit_vectors
 from ..em.sionna_compat import sionna_face_coefficients
+from ..em.utd_terms import SIN_BETA_0_FLOOR
 from ..em.utd import (
     diffraction_jones,
     diffraction_jones_matrices,
@@ -179,7 +180,6 @@ def _swap_faces(g: dict, swap: np.ndarray) -> dict:
     return g
 
 
-SIN_BETA_0_FLOOR = 1e-6  # the default floor of wavepaths.em.utd
 BOUNDARY_EPS = 1e-12  # [rad] an observer this close to a shadow/reflection boundary is on it
 BOUNDARY_NUDGE = 1e-9  # [rad] the side it is moved to, matching the geometrical-optics decision
 

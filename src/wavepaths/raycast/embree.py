@@ -133,11 +133,12 @@ class EmbreeRayCaster:
         coverage pool's workers, see :func:`wavepaths.search.kernels.set_threads`), one per
         ``THREAD_MIN_SEGMENTS`` segments; 1 off the main thread (tiles traced on several
         threads already share the cores)."""
-        if k < 2 * THREAD_MIN_SEGMENTS or threading.current_thread() is not threading.main_thread():
-            return 1
-        import numba
+        if (self._kernels is None or k < 2 * THREAD_MIN_SEGMENTS
+                or threading.current_thread() is not threading.main_thread()):
+            return 1  # (without numba, the parts run one after the other)
+        from ..search import kernels
 
-        return max(1, min(int(numba.get_num_threads()), k // THREAD_MIN_SEGMENTS))
+        return max(1, min(kernels.threads(), k // THREAD_MIN_SEGMENTS))
 
     @property
     def rays_cast(self) -> int:

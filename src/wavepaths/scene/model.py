@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import warnings
 from dataclasses import dataclass, field
+from dataclasses import fields as dataclass_fields
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -107,6 +108,16 @@ class Scene:
     source: str = ""
     dropped_degenerate: int = 0
 
+    def __post_init__(self) -> None:
+        # the arrays are read-only (the dihedra, the ray caster and the fingerprint are built
+        # from them once and kept): held as read-only views, so the caller's arrays keep their flags
+        for f in dataclass_fields(self):
+            a = getattr(self, f.name)
+            if isinstance(a, np.ndarray) and a.flags.writeable:
+                v = a.view()
+                v.flags.writeable = False
+                object.__setattr__(self, f.name, v)
+
     # ---- sizes ---------------------------------------------------------------------
     @property
     def num_triangles(self) -> int:
@@ -115,6 +126,31 @@ class Scene:
     @property
     def num_polygons(self) -> int:
         return len(self.polygon_normal)
+
+    @functools.cached_property
+    def geometry_fingerprint(self) -> str:
+        """A digest of the scene's geometry: the welded triangles, their objects and which
+        share a material, and the tolerances (not the materials' parameters). Paths carry it
+        (:attr:`wavepaths.search.paths.Paths.scene_fingerprint`): their fields may be computed
+        with other materials on the same geometry (:func:`with_materials`), not in another
+        scene."""
+        import hashlib
+
+        h = hashlib.blake2b(digest_size=16)
+        for a in (self.vertices, self.triangles, self.triangle_object, self.triangle_material):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update(repr((self.object_names, len(self.materials), self.tolerances)).encode())
+        return h.hexdigest()
+
+    @functools.cached_property
+    def fingerprint(self) -> str:
+        """A digest of everything the path search reads from the scene: its
+        :attr:`geometry_fingerprint` and the materials (absorbers reflect no path). A
+        :class:`~wavepaths.search.context.TxContext` carries it, so that :func:`wavepaths.trace`
+        refuses one built for another scene."""
+        import hashlib
+
+        return hashlib.blake2b((self.geometry_fingerprint + repr(self.materials)).encode(), digest_size=16).hexdigest()
 
     @functools.cached_property
     def bounds(self) -> np.ndarray:
@@ -238,6 +274,23 @@ class Scene:
         return scene_info(self)
 
 
+def _array_of(where: str, name: str, value, dtype, shape: tuple) -> np.ndarray:
+    """``value`` as an array of ``dtype`` and ``shape`` (-1: any length), or a SceneError naming
+    ``name``: a (6, 2) ``vertices`` array is refused, not read as four points, and float
+    indices are refused, not truncated."""
+    a = np.asarray(value)
+    if a.ndim != len(shape) or any(want not in (-1, got) for want, got in zip(shape, a.shape)):
+        want = "(" + ", ".join("n" if k == -1 else str(k) for k in shape) + (",)" if len(shape) == 1 else ")")
+        raise SceneError(f"{where}`{name}` must have shape {want}, got {a.shape}")
+    if np.issubdtype(dtype, np.integer):
+        if a.size and not np.issubdtype(a.dtype, np.integer):
+            if not (np.issubdtype(a.dtype, np.floating) and np.all(np.isfinite(a)) and np.all(a == np.round(a))):
+                raise SceneError(f"{where}`{name}` must hold integer indices, got {a.dtype} values")
+    elif not np.issubdtype(a.dtype, np.number) or np.issubdtype(a.dtype, np.complexfloating):
+        raise SceneError(f"{where}`{name}` must hold real numbers, got {a.dtype}")
+    return a.astype(dtype)
+
+
 def build_scene(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -275,20 +328,31 @@ def build_scene(
         No triangles, non-finite coordinates, or indices out of range.
     """
     tol = tolerances or SceneTolerances()
+    if not isinstance(tol, SceneTolerances):
+        raise SceneError(f"`tolerances` must be a SceneTolerances, got {type(tol).__name__}")
     where = f"{source}: " if source else ""
-    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    triangle_object = np.asarray(triangle_object, dtype=np.int64).reshape(-1)
-    triangle_material = np.asarray(triangle_material, dtype=np.int64).reshape(-1)
+    vertices = _array_of(where, "vertices", vertices, np.float64, (-1, 3))
+    triangles = _array_of(where, "triangles", triangles, np.int64, (-1, 3))
+    triangle_object = _array_of(where, "triangle_object", triangle_object, np.int64, (-1,))
+    triangle_material = _array_of(where, "triangle_material", triangle_material, np.int64, (-1,))
     if len(triangles) == 0:
         raise SceneError(f"{where}the mesh has no faces")
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices).all(axis=1)).sum())
         raise SceneError(f"{where}{bad} vertices have NaN or infinite coordinates")
     if triangles.min() < 0 or triangles.max() >= len(vertices):
-        raise SceneError(f"{where}a face refers to a vertex that does not exist")
-    if len(triangle_object) != len(triangles) or len(triangle_material) != len(triangles):
-        raise SceneError(f"{where}object and material ids must have one entry per triangle")
+        raise SceneError(f"{where}a face refers to a vertex that does not exist: `triangles` must index `vertices` "
+                         f"(0..{len(vertices) - 1}), got {int(triangles.min())}..{int(triangles.max())}")
+    for name, ids, table in (("triangle_object", triangle_object, object_names),
+                             ("triangle_material", triangle_material, materials)):
+        if len(ids) != len(triangles):
+            raise SceneError(f"{where}`{name}` must have one entry per triangle ({len(triangles)}), got {len(ids)}")
+        if ids.min() < 0 or ids.max() >= len(table):
+            what = "object_names" if name == "triangle_object" else "materials"
+            raise SceneError(f"{where}`{name}` must index `{what}` (0..{len(table) - 1}), "
+                             f"got {int(ids.min())}..{int(ids.max())}")
+    if not all(isinstance(m, Material) for m in materials):
+        raise SceneError(f"{where}`materials` must be Material objects")
 
     used = vertices[np.unique(triangles)]
     diagonal = scene_size(used) or 1.0

@@ -77,7 +77,12 @@ def _compiled():
     return _numba.points_in_polygons
 
 
-def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray, eps: float = 1e-9,
+POLYGON_MARGIN = 1e-9
+"""Margin of the barycentric inside test of :func:`points_in_polygons` (closed polygons): a
+point on a polygon's border, up to the rounding of its coordinates, is inside."""
+
+
+def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray, eps: float = POLYGON_MARGIN,
                        compiled: bool | None = None) -> np.ndarray:
     """Whether ``points[i]`` lies inside polygon ``polygons[i]`` (closed).
 

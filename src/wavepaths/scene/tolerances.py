@@ -4,13 +4,29 @@ Every tolerance the engine uses is a named field here, with the reason beside it
 is expressed relative to the scene's size (``Scene.diagonal``: twice the largest distance of
 a vertex from the vertices' mean, the bounding box's diagonal for a box-shaped scene and,
 unlike that diagonal, unchanged by a rotation) so
-that a 10 m room and a 2 km city behave alike. Nothing is a module global: a
-:class:`SceneTolerances` travels with its :class:`~wavepaths.scene.model.Scene`.
+that a 10 m room and a 2 km city behave alike. A :class:`SceneTolerances` travels with its
+:class:`~wavepaths.scene.model.Scene`; none is a module global.
+
+Beside them, a few fixed numerical constants live next to the code that uses them, each
+documented there. They are not settings, because they are margins of a computation rather
+than a judgement about the scene: each is relative to the scene's size or to a length the
+code has just computed, or an angle, and none should change with the scene:
+``search.through_vertices.CHORD`` and ``HEIGHT`` (the chord that tests a leg through a
+reflection's vertex, in scene diagonals), ``search.visibility.MIRROR_STEP`` (where a hint
+ray starts, in leg lengths), ``search.reach.REACH_SLACK`` (a margin in the cosine domain),
+``topology.sectors.FACE_ANGLE_TOL`` (FindDihedron's resolution [rad]),
+``search.launch.END_INSET`` (in sample spacings), ``search.images.SEGMENT_EPS`` and
+``scene.polygon_query.POLYGON_MARGIN`` (a segment's parameter and barycentric
+coordinates), ``em.utd_terms.SIN_BETA_0_FLOOR``, ``fields.chain.BOUNDARY_EPS`` and
+``BOUNDARY_NUDGE`` (angles [rad]).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, fields
+
+from ..errors import WavepathsError
 
 
 @dataclass(frozen=True)
@@ -62,3 +78,12 @@ class SceneTolerances:
     flat_angle: float = 1e-2
     plane_distance: float = 1e-6
     ray_offset: float = 1e-6
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            angle = f.name.endswith("_angle")
+            top, unit = (math.pi / 2, "rad") if angle else (1.0, "of the scene's diagonal")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 <= v < top):
+                raise WavepathsError(f"`{f.name}` must be a finite number in [0, {top:.4g}) {unit}, got {v!r}")
+

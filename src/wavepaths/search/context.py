@@ -101,6 +101,8 @@ class TxContext:
     # kernels.CACHE_LOCK (diffraction._source_frames: per order, the transmitter side and the
     # Keller-cone frame of every source); receiver-independent, so shared by every tile
     derived: dict = field(default_factory=dict)
+    # the scene it was built for (Scene.fingerprint): trace() refuses it for another scene
+    scene_fingerprint: str = ""
 
 
 def _group(keys: np.ndarray):
@@ -293,4 +295,4 @@ def build_tx_context(scene: "Scene", tx: np.ndarray, options: TraceOptions | Non
     source_edges = [edge_tree(scene, np.unique(src.dihedron)) if len(src.dihedron) else None for src in sources] \
         if edges is not None else []
     return TxContext(tx, options, levels, sectors, diffracting, sources, stride, stats, beams, apertures,
-                     source_edges)
+                     source_edges, scene_fingerprint=scene.fingerprint)

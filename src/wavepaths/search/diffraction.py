@@ -28,7 +28,8 @@ from .diffraction_bounds import (FRAME_BLOCK, UTD_BOUND_FLOOR, KellerFrame, _dif
                                  keller_cone_keep, keller_frame)
 from .diffraction_join import _diffraction_prefilter, _join_chunks, _join_pairs, _join_ranges, _joined_candidates
 from .end_sides import _EndSide, _keller_window, _receiver_side, _receiver_side_by_tree, _transmitter_side
-from .images import ImageLevel, backtrace
+from ..scene.polygon_query import POLYGON_MARGIN
+from .images import SEGMENT_EPS, ImageLevel, backtrace
 from .reach import MIRROR_REACH_BUDGET, MirrorReach, mirror_reach
 from .paths import InteractionType, PathBatch
 
@@ -395,7 +396,7 @@ def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, sta
         scene.dihedra.origin, scene.dihedra.direction, 4 * scene.length_tolerance(scene.tolerances.ray_offset),
         rx_lv.images, rx_lv.polygons, rx_lv.source, c_(rx, dtype=np.float64), tx_lv.images, tx_lv.polygons,
         scene.polygon_normal, scene.polygon_offset, scene.polygon_tri_ptr, scene.polygon_tris, scene.triangles,
-        scene.vertices, scene.triangle_dual, 1e-12, 1e-9, near, keep, verts, rej)
+        scene.vertices, scene.triangle_dual, SEGMENT_EPS, POLYGON_MARGIN, near, keep, verts, rej)
     if near.any():
         grazing[tx_lv.source[tside.row[src_rows[near]]], rx_lv.source[rside.row[rows[near]]]] = True
         stats["pairs_on_boundaries"] += int(near.sum())
@@ -406,7 +407,7 @@ def _diffraction_candidates_compiled(scene, ctx, a, b, rx, rx_lv, rx_offset, sta
     e, d, sec, c = rside.row[rr], rside.dihedron[rr], rside.sector[rr], tside.row[ss]
     amp = None
     if ctx.options.prune_frequency_hz is not None and (ctx.options.prune_db is not None or pending is not None):
-        from ..fields.chain import SIN_BETA_0_FLOOR
+        from ..em.utd_terms import SIN_BETA_0_FLOOR
         from . import _numba_tolerance
         from .paths import SPEED_OF_LIGHT
 

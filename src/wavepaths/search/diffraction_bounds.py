@@ -125,7 +125,7 @@ def _diffraction_amplitude_bound(ctx: TxContext, phi: np.ndarray, phi_prime: np.
     a 1 % margin for the rounding between the search's angles and the fields'.
     """
     from ..em.utd import utd_magnitude_bound
-    from ..fields.chain import SIN_BETA_0_FLOOR
+    from ..em.utd_terms import SIN_BETA_0_FLOOR
     from .paths import SPEED_OF_LIGHT
 
     k = 2.0 * np.pi * ctx.options.prune_frequency_hz / SPEED_OF_LIGHT

@@ -438,8 +438,13 @@ def build_image_levels_all_pairs(
     return levels
 
 
+SEGMENT_EPS = 1e-12
+"""Margin of a back-traced reflection point on its segment's parameter (``eps < t < 1 - eps``):
+a point at either end of its leg is no reflection."""
+
+
 def backtrace(
-    scene: "Scene", target: np.ndarray, level: ImageLevel, chain: np.ndarray, eps: float = 1e-12,
+    scene: "Scene", target: np.ndarray, level: ImageLevel, chain: np.ndarray, eps: float = SEGMENT_EPS,
     compiled: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Reflection points of image chains that end at ``target`` (image method, backwards).
@@ -475,7 +480,7 @@ def backtrace(
     rejected : dict
         ``{"segment": count, "outside_polygon": count}``.
     """
-    from ..scene.polygon_query import points_in_polygons
+    from ..scene.polygon_query import POLYGON_MARGIN, points_in_polygons
 
     k = level.order
     m = len(chain)
@@ -490,7 +495,7 @@ def backtrace(
         n = _numba.backtrace(np.ascontiguousarray(target, dtype=np.float64), level.images, level.polygons,
                              np.ascontiguousarray(chain, dtype=np.int64), scene.polygon_normal, scene.polygon_offset,
                              scene.polygon_tri_ptr, scene.polygon_tris, scene.triangles, scene.vertices,
-                             scene.triangle_dual, float(eps), 1e-9, keep, points, rej)
+                             scene.triangle_dual, float(eps), POLYGON_MARGIN, keep, points, rej)
         return keep[:n], points[:n], {"segment": int(rej[0]), "outside_polygon": int(rej[1])}
     keep = np.arange(m)
     found = []

@@ -27,6 +27,10 @@ class InteractionType(enum.IntEnum):
 INTERACTION_NAMES = {InteractionType.REFLECTION: "reflection", InteractionType.DIFFRACTION: "diffraction"}
 
 
+_ARRAY_FIELDS = ("tx_positions", "rx_positions", "tx_index", "rx_index", "depth", "interactions", "primitive",
+                 "triangle", "wedge_faces", "vertices")
+
+
 @dataclass(frozen=True, eq=False)
 class Paths:
     """Every path found between ``m`` transmitters and ``n`` receivers (flat, ``N`` paths).
@@ -54,10 +58,13 @@ class Paths:
         position repeats, so segments there have zero length.
     stats : dict
         Per-stage counters: candidates considered, rejected by each test, rays cast.
+    scene_fingerprint : str
+        :attr:`wavepaths.scene.Scene.geometry_fingerprint` of the scene they were traced in
+        (set by :func:`wavepaths.trace`; empty for paths built otherwise): the fields refuse
+        them with another scene, and take them with other materials on the same geometry.
 
-    The arrays are results, not to be changed in place: the derived ``segment_lengths``,
-    ``lengths`` and the departure and arrival directions are computed once from ``vertices``
-    and kept.
+    The arrays are results, held read-only: the derived ``segment_lengths``, ``lengths`` and
+    the departure and arrival directions are computed once from ``vertices`` and kept.
     """
 
     tx_positions: np.ndarray
@@ -71,6 +78,17 @@ class Paths:
     wedge_faces: np.ndarray
     vertices: np.ndarray
     stats: dict = field(default_factory=dict)
+    scene_fingerprint: str = ""
+
+    def __post_init__(self) -> None:
+        # results are read-only (a changed vertex would leave the cached lengths stale): each
+        # array is held as a read-only view, so the caller's own arrays keep their flags
+        for name in _ARRAY_FIELDS:
+            a = getattr(self, name)
+            if isinstance(a, np.ndarray) and a.flags.writeable:
+                v = a.view()
+                v.flags.writeable = False
+                object.__setattr__(self, name, v)
 
     def __len__(self) -> int:
         return len(self.tx_index)
@@ -180,6 +198,7 @@ class Paths:
             self.wedge_faces[mask],
             self.vertices[mask],
             dict(self.stats),
+            self.scene_fingerprint,
         )
 
     # ---- public forms ---------------------------------------------------------------
@@ -362,7 +381,8 @@ def concatenate(first: Paths, second: Paths) -> Paths:
                  np.concatenate([_pad_columns(p.primitive, d, -1) for p in (first, second)]),
                  np.concatenate([_pad_columns(p.triangle, d, -1) for p in (first, second)]),
                  np.concatenate([first.wedge_faces, second.wedge_faces]),
-                 np.concatenate([_pad_vertices(p.vertices, d + 2) for p in (first, second)]), dict(first.stats))
+                 np.concatenate([_pad_vertices(p.vertices, d + 2) for p in (first, second)]), dict(first.stats),
+                 first.scene_fingerprint if first.scene_fingerprint == second.scene_fingerprint else "")
 
 
 def assemble(tx: np.ndarray, rx: np.ndarray, batches: list[PathBatch], stats: dict, sort: bool = True,
