@@ -226,3 +226,38 @@ def test_into_at_a_triangles_centroid(tmp_path):
     assert np.isfinite(cone.reference).all()
     np.testing.assert_array_equal(cone.into(np.array([[0, 0, -1.0], [0.3, 0.1, -1], [0, 0, 1.0], [1, 0, 0.0]])),
                                   [True, True, False, False])
+
+
+def test_many_points_on_faces_edges_and_corners_at_once(tmp_path):
+    """Receivers inside one face take the half-space shortcut (all at once, a review timed the
+    general cone per receiver at 0.5 ms), the others the general cone; either way a leg from
+    a transmitter counts as entering the solid exactly when points just short of the receiver
+    along it lie inside. 600 points drawn on the L prism's faces (inside triangles, on their
+    sides, on the prism's edges and corners), each reached from 8 random transmitters."""
+    from wavepaths.search.on_faces import legs_into_solids
+    from wavepaths.search.paths import Paths
+
+    scene = wp.load_scene(str(write_l_prism(tmp_path / "l.obj")))
+    rng = np.random.default_rng(11)
+    tri = rng.integers(0, scene.num_triangles, 600)
+    w = rng.dirichlet(np.ones(3), 600)
+    w[:150, 0] = 0.0  # on a triangle's side: a face's diagonal or the prism's edge
+    w[:150] /= w[:150].sum(axis=1, keepdims=True)
+    w[150:200] = np.eye(3)[rng.integers(0, 3, 50)]  # on a corner of the prism
+    rx = np.einsum("ni,nij->nj", w, scene.vertices[scene.triangles[tri]])
+    cones = solid_surface_cones(scene, rx)
+    assert len(cones) == len(rx)
+    simple = sum(c[0].is_face_interior for c in cones.values() if len(c) == 1)
+    assert 300 < simple < 450  # both ways are taken
+    tx = rng.uniform(-4, 10, (8, 3))
+    ti, ri = np.repeat(np.arange(8), len(rx)), np.tile(np.arange(len(rx)), 8)
+    v = np.stack([tx[ti], rx[ri]], axis=1)
+    z = np.zeros((len(ti), 0), np.int64)
+    paths = Paths(tx, rx, ti, ri, np.zeros(len(ti), np.int64), z.astype(np.int8), z, z,
+                  np.full((len(ti), 2), -1), v)
+    got = legs_into_solids(paths, {}, cones)
+    d = tx[ti] - rx[ri]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    truth = inside_l_prism(rx[ri] + 1e-7 * d)
+    assert 0.2 < truth.mean() < 0.8
+    np.testing.assert_array_equal(got, truth)

@@ -104,6 +104,18 @@ class SurfaceCone:
     edge_on: np.ndarray
     reference: np.ndarray
 
+    @classmethod
+    def face_interior(cls, normal: np.ndarray) -> "SurfaceCone":
+        """The cone at a point inside one face, off its triangles' sides: the half-space
+        below the face, whose :meth:`into` is ``d . normal < -1e-12 |d|``."""
+        n = np.asarray(normal, dtype=np.float64).reshape(1, 3)
+        return cls(n, np.zeros(1, np.int64), np.zeros((1, 3, 3)), np.zeros((1, 3), bool), n[0])
+
+    @property
+    def is_face_interior(self) -> bool:
+        """Whether the point lies inside one face, off its triangles' sides (one normal, no side on it)."""
+        return len(self.normals) == 1 and not self.edge_on.any()
+
     def _in_face_cone(self, face: int, w: np.ndarray) -> np.ndarray:
         """(m,) bool: whether the in-plane directions ``w`` (m, 3) point into ``face``'s polygon."""
         out = np.zeros(len(w), dtype=bool)
@@ -236,11 +248,21 @@ def solid_surface_cones(scene: Scene, points: np.ndarray, budget: int = BUDGET) 
         return {}
     shell, outward = _shells(scene)
     tol = plane_tolerance(scene)
-    out: dict[int, list[SurfaceCone]] = {}
-    for p in np.unique(i):
+    order = np.argsort(i, kind="stable")
+    i, q = i[order], q[order]
+    uniq, start, count = np.unique(i, return_index=True, return_counts=True)
+    # a point on one face only, strictly inside one of its triangles (the common case: a
+    # receiver on a roof), has the half-space below the face as its cone: all such at once
+    single = count == 1
+    inside, normal = _strictly_inside(scene, points[uniq[single]], q[start[single]], outward, tol)
+    out: dict[int, list[SurfaceCone]] = {int(p): [SurfaceCone.face_interior(n)]
+                                         for p, n in zip(uniq[single][inside], normal[inside])}
+    rest = np.ones(len(uniq), dtype=bool)
+    rest[np.flatnonzero(single)[inside]] = False
+    for p, s0, c in zip(uniq[rest].tolist(), start[rest].tolist(), count[rest].tolist()):
         point = points[p]
         faces: dict[int, list[tuple]] = {}
-        for poly in q[i == p].tolist():
+        for poly in q[s0 : s0 + c].tolist():
             t = scene.polygon_triangles(poly)
             v = scene.vertices[scene.triangles[t]]
             inward, dist = _triangle_sides(v, outward[t], point)
@@ -253,6 +275,29 @@ def solid_surface_cones(scene: Scene, points: np.ndarray, budget: int = BUDGET) 
         if cones:
             out[int(p)] = cones
     return out
+
+
+def _strictly_inside(scene: Scene, points: np.ndarray, polygons: np.ndarray, outward: np.ndarray,
+                     tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(inside, normal)``: whether each point (k, 3) lies inside a triangle of its polygon
+    (k,) farther than ``tol`` from the triangle's three sides (:func:`_triangle_sides`' test,
+    all rows at once), and the polygon's outward unit normal (k, 3)."""
+    ptr, tris = scene.polygon_tri_ptr, scene.polygon_tris
+    cnt = ptr[polygons + 1] - ptr[polygons]
+    row = np.repeat(np.arange(len(polygons)), cnt)
+    first = np.repeat(ptr[polygons], cnt)
+    t = tris[first + np.arange(len(row)) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+    v = scene.vertices[scene.triangles[t]]
+    n = outward[t]
+    sides = np.roll(v, -1, axis=1) - v
+    inward = np.cross(n[:, None, :], sides)
+    inward /= np.maximum(np.linalg.norm(inward, axis=2, keepdims=True), 1e-300)
+    toward = np.einsum("mij,mij->mi", np.roll(v, -2, axis=1) - v, inward)
+    inward *= np.where(toward < 0, -1.0, 1.0)[..., None]
+    dist = np.einsum("mij,mij->mi", points[row][:, None, :] - v, inward)
+    strict = np.all(dist > tol, axis=1)
+    inside = np.bincount(row[strict], minlength=len(polygons)) > 0
+    return inside, outward[tris[ptr[polygons]]]
 
 
 def legs_into_solids(paths, tx_cones: dict[int, list[SurfaceCone]], rx_cones: dict[int, list[SurfaceCone]],
@@ -276,8 +321,27 @@ def legs_into_solids(paths, tx_cones: dict[int, list[SurfaceCone]], rx_cones: di
     first = paths.vertices[:, 1] - paths.vertices[:, 0]
     back = paths.vertices[rows, paths.depth] - paths.vertices[rows, paths.depth + 1]  # from rx to the vertex before
     for index, legs, cones_of in ((paths.tx_index, first, tx_cones), (paths.rx_index + rx_offset, back, rx_cones)):
-        for point, cones in cones_of.items():
-            on = np.nonzero(index == point)[0]
-            for cone in cones if len(on) else ():
-                bad[on] |= cone.into(legs[on])
+        if not cones_of:
+            continue
+        # points inside one face: d . n < -1e-12 |d| (SurfaceCone.into for that cone), every path at once
+        simple = {p: c[0].normals[0] for p, c in cones_of.items() if len(c) == 1 and c[0].is_face_interior}
+        if simple:
+            keys = np.fromiter(simple, dtype=np.int64, count=len(simple))
+            o = np.argsort(keys)
+            keys, normals = keys[o], np.asarray(list(simple.values()))[o]
+            at = np.minimum(np.searchsorted(keys, index), len(keys) - 1)
+            on = np.flatnonzero(keys[at] == index)
+            d = legs[on]
+            d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+            bad[on] |= np.einsum("ij,ij->i", d, normals[at[on]]) < -1e-12
+        # the others (edges, corners, sides): each point's paths, grouped once
+        others = [p for p in cones_of if p not in simple]
+        if others:
+            o = np.argsort(index, kind="stable")
+            lo = np.searchsorted(index[o], others, side="left")
+            hi = np.searchsorted(index[o], others, side="right")
+            for point, a, b in zip(others, lo.tolist(), hi.tolist()):
+                on = o[a:b]
+                for cone in cones_of[point] if len(on) else ():
+                    bad[on] |= cone.into(legs[on])
     return bad
