@@ -22,3 +22,10 @@ def unit_cross(a: np.ndarray, b: np.ndarray, fallback: np.ndarray) -> np.ndarray
     c = np.cross(a, b)
     n = np.linalg.norm(c, axis=-1, keepdims=True)
     return np.where(n > 1e-12, c / np.where(n > 0, n, 1.0), fallback)
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    """``v`` divided by its norm over the last axis (zero vectors left as they are)."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+

@@ -257,3 +257,16 @@ def test_tx_power_must_be_a_finite_number(power):
 def test_cli_non_finite_tx_power_exits_2(power):
     r = run_paths("half_plane", "--tx", -10, 5, -5, "--rx", 10, -5, -5, f"--tx-power-dbm={power}", "--json")
     assert r.returncode == 2 and "Traceback" not in r.stderr and "--tx-power-dbm" in r.stderr  # named by its flag
+
+
+def test_the_impulse_response_of_a_pair_that_does_not_exist_is_an_error():
+    """``cir(tx=5)`` of a one-transmitter result returned empty arrays, as for a pair that no
+    path joins; now only the latter is empty."""
+    s, p = far_los()
+    res = compute_fields(s, p)
+    a, tau = res.cir(0, 0)
+    assert len(a) == len(tau) == 1
+    for kwargs, name in (({"tx": 5}, "tx"), ({"rx": -1}, "rx"), ({"tx": 0.0}, "tx")):
+        with pytest.raises(WavepathsError, match=f"`{name}` must be an index in 0..0"):
+            res.cir(**kwargs)
+

@@ -45,5 +45,6 @@ def test_threads_give_the_same_paths_and_counts(rng, compiled):
 
 def test_threads_must_be_positive():
     scene = load_scene("street_canyon")
-    with pytest.raises(WavepathsError, match="threads"):
-        trace(scene, TX, np.array([[20.0, 0.0, 1.5]]), threads=0)
+    for bad in (0, -1, 1.5, "2", True):  # (1.5 was taken as 1)
+        with pytest.raises(WavepathsError, match="`threads` must be a positive integer"):
+            trace(scene, TX, np.array([[20.0, 0.0, 1.5]]), threads=bad)

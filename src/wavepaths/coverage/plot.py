@@ -36,6 +36,8 @@ import numpy as np
 from .grid import MeshGrid, PlanarGrid
 
 if TYPE_CHECKING:  # pragma: no cover
+    import matplotlib.artist
+
     from ..scene.model import Scene
     from .result import CoverageMap
 
@@ -275,7 +277,7 @@ def plot_coverage(
     legend: bool = True,
     details: bool = True,
     below_color: str = BELOW_COLOR,
-):
+) -> "matplotlib.artist.Artist":
     """Draw one quantity of a coverage map; returns the matplotlib ``AxesImage`` or collection.
 
     Parameters

@@ -29,13 +29,17 @@ from __future__ import annotations
 import json
 import zipfile
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from ..em.constants import SPEED_OF_LIGHT  # noqa: F401 (re-exported)
 from ..errors import WavepathsError
 from ..fields.result import ETA_0, power_db
 from .grid import Grid, MeshGrid, PlanarGrid
+
+if TYPE_CHECKING:  # pragma: no cover
+    import matplotlib.artist
 
 MECHANISMS = ("los", "reflection", "diffraction")
 Mechanism = Literal["los", "reflection", "diffraction"]
@@ -55,7 +59,6 @@ NPZ_UNITS = {
 """The unit of each array of a map file (:meth:`CoverageMap.save`) and of its settings, kept
 under ``metadata["units"]``: SI units, dB only in names ending ``_db``, ``_dbm``,
 ``_dbuv_m``; ``1`` a dimensionless amplitude normalised like Sionna RT's ``Paths.a``."""
-SPEED_OF_LIGHT = 299_792_458.0
 
 
 def field_strength_dbuv_m(received_power_dbm: np.ndarray, frequency_hz: float) -> np.ndarray:
@@ -397,7 +400,7 @@ class CoverageMap:
             )
 
     # ---- pictures ----------------------------------------------------------------------
-    def plot(self, quantity: str = "path_gain_db", tx: int | None = None, **kwargs):
+    def plot(self, quantity: str = "path_gain_db", tx: int | None = None, **kwargs) -> "matplotlib.artist.Artist":
         """Draw the map with matplotlib (see :func:`wavepaths.coverage.plot.plot_coverage`)."""
         from .plot import plot_coverage
 

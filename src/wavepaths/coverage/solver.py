@@ -27,9 +27,10 @@ import sys
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import WavepathsError
 from ..fields import FieldConfig, compute_fields
@@ -352,13 +353,13 @@ def _warn_unbounded_pruning(opts: TraceOptions, cfg: FieldConfig) -> None:
 
 def coverage(
     scene: Scene,
-    tx,
+    tx: ArrayLike,
     grid: Grid,
     options: TraceOptions | None = None,
     *,
     fields: FieldConfig | None = None,
     settings: CoverageOptions | None = None,
-    client=None,
+    client: Any = None,
     progress: bool | Callable[[int], None] | None = None,
 ) -> CoverageMap:
     """A coverage map: path gain, received power and field strength on every cell of ``grid``.

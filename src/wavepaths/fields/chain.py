@@ -34,6 +34,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._vec import unit as _unit
+
 from .._vec import unit_cross as _perp_unit
 from ..em.antennas import antenna_field_vectors
 from ..em.fresnel import reflection_coefficients
@@ -52,11 +54,6 @@ from .config import FieldConfig
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..scene.model import Scene
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 0, n, 1.0)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -5,13 +5,16 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from scipy.constants import speed_of_light
 
 from ..em.antennas import Antenna
 from ..errors import WavepathsError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
 
 DiffractionModel = Literal["utd", "gtd"]
 Compat = Literal["none", "sionna"]
@@ -95,7 +98,7 @@ class FieldConfig:
                 or not math.isfinite(self.tx_power_dbm):
             raise WavepathsError(f"`tx_power_dbm` must be a finite number [dBm], got {self.tx_power_dbm!r}")
 
-    def check_materials(self, scene) -> None:
+    def check_materials(self, scene: "Scene") -> None:
         """Raise :class:`~wavepaths.errors.WavepathsError` now, before a search, when a material of
         ``scene``'s faces has no value at this frequency (an ITU-R P.2040 material outside its
         range): the fields would fail only after the whole search."""

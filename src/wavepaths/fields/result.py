@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..em.constants import SPEED_OF_LIGHT  # noqa: F401 (re-exported)
 from ..errors import WavepathsError
 from ..search.paths import Paths
 
@@ -15,7 +16,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .config import FieldConfig
 
 ETA_0 = 376.730313668  # free-space impedance [ohm]
-SPEED_OF_LIGHT = 299_792_458.0  # [m/s]
 
 
 def power_db(x: np.ndarray) -> np.ndarray:
@@ -212,7 +212,12 @@ class FieldResult:
 
     # ---- channel responses ------------------------------------------------------------
     def cir(self, tx: int = 0, rx: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Channel impulse response of one pair: taps ``a`` (k,) and delays ``tau`` (k,) [s]."""
+        """Channel impulse response of one pair: taps ``a`` (k,) and delays ``tau`` (k,) [s]
+        (empty where no path joins them; a transmitter or receiver that does not exist is an
+        error)."""
+        for name, value, count in (("tx", tx, len(self.paths.tx_positions)), ("rx", rx, len(self.paths.rx_positions))):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value < count:
+                raise WavepathsError(f"`{name}` must be an index in 0..{count - 1}, got {value!r}")
         sel = (self.paths.tx_index == tx) & (self.paths.rx_index == rx)
         return self.a[sel], self.delays[sel]
 

@@ -142,6 +142,7 @@ def build_segment_bvh(exact: "ExactSegments", leaf_size: int = 8) -> SegmentBVH:
     edges = np.concatenate([exact.inward[tri], exact.inward_offset[tri][:, :, None]], axis=2).reshape(len(tri), 12)
     rows = np.concatenate([exact.normal[tri], exact.offset[tri, None], exact.tol[tri, None], edges, exact.box_lo[tri],
                            exact.box_hi[tri]], axis=1)
+    assert rows.shape[1] == ROW  # the layout the compiled walk reads (raycast._numba)
     return SegmentBVH(np.asarray(box, dtype=np.float64).reshape(-1, 6), np.asarray(first, np.int64),
                       np.asarray(count, np.int64), np.asarray(right, np.int64), tri,
                       np.ascontiguousarray(rows, dtype=np.float64), float(exact.edge_tol),

@@ -11,6 +11,7 @@ import os
 import re
 import warnings
 import xml.etree.ElementTree as ET
+from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
@@ -18,6 +19,9 @@ import trimesh
 from ..em.materials import ITU_MATERIALS, Material
 from .mitsuba import _legacy_id
 from .model import WavepathsWarning
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import Scene
 
 
 def _material_id(mat: Material, index: int, taken: set[str]) -> str:
@@ -84,7 +88,7 @@ def _unique(name: str, taken: set[str]) -> str:
     return out
 
 
-def write_mitsuba_xml(scene, path: str, mesh_dir: str = "meshes") -> list[str]:
+def write_mitsuba_xml(scene: "Scene", path: str, mesh_dir: str = "meshes") -> list[str]:
     """Write ``scene`` as Mitsuba XML + one PLY per object, loadable by Sionna RT and wavepaths.
 
     Each object becomes a shape ``id="mesh-<name>"``, so that both engines read back its

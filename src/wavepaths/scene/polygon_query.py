@@ -11,39 +11,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .model import Scene
 
 
-def points_in_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, eps: float) -> np.ndarray:
-    """Whether each point lies in its triangle (closed, barycentric margin ``eps``).
-
-    The point is assumed to lie in (or very near) the triangle's plane; it is
-    projected onto the plane by the barycentric solve.
-
-    Parameters
-    ----------
-    points, a, b, c : (k, 3) float64
-    eps : float
-        Relative barycentric margin (1e-9 accepts points on an edge shared by two
-        triangles of one polygon despite rounding).
-
-    Returns
-    -------
-    (k,) bool
-    """
-    v0 = b - a
-    v1 = c - a
-    v2 = points - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    den = np.where(den > 0, den, np.inf)
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    u = 1.0 - v - w
-    return (u >= -eps) & (v >= -eps) & (w >= -eps)
-
-
 def triangle_dual_basis(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Per-triangle map from a point in its plane to barycentric coordinates.
 
@@ -138,8 +105,3 @@ def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray,
         pending = pending[~hit]
         j += 1
     return out
-
-
-def signed_plane_distance(scene: "Scene", points: np.ndarray, polygons: np.ndarray) -> np.ndarray:
-    """Signed distance [m] of ``points[i]`` (k, 3) from the plane of ``polygons[i]``."""
-    return np.einsum("ij,ij->i", points, scene.polygon_normal[polygons]) - scene.polygon_offset[polygons]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 
@@ -55,6 +56,11 @@ BOOLEAN_FIELDS = ("los", "diffraction", "lit_region", "skip_absorbers", "compile
 # rays' arrays alone take tens of GB, and a typo should be an error, not a swap storm
 MAX_LAUNCH_RAYS = 1 << 26
 MAX_LAUNCH_FAN = 1 << 16
+
+
+CandidateMode = Literal["exhaustive", "launched"]
+"""How candidates are found: every one by the image method and the closed form, or from rays
+launched from the transmitter and the edges (docs/search.md)."""
 
 
 @dataclass(frozen=True)
@@ -170,11 +176,11 @@ class TraceOptions:
     prune_db: float | None = None
     prune_frequency_hz: float | None = None
     tolerance_db: float | None = None
-    disable_culling: frozenset = frozenset()
+    disable_culling: frozenset[str] = frozenset()
     compiled: bool = True
-    diffraction_candidates: str = "exhaustive"
+    diffraction_candidates: CandidateMode = "exhaustive"
     launch_fan: int = 256
-    reflection_candidates: str = "exhaustive"
+    reflection_candidates: CandidateMode = "exhaustive"
     launch_rays: int = 1 << 21
     free_edges: bool = True
 

@@ -10,10 +10,14 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-SPEED_OF_LIGHT = 299_792_458.0  # m/s
+from ..em.constants import SPEED_OF_LIGHT  # noqa: F401 (re-exported)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..scene.model import Scene
 
 
 class InteractionType(enum.IntEnum):
@@ -173,7 +177,7 @@ class Paths:
         """Zenith and azimuth [rad] of the direction the wave comes from, seen at the receiver, each (N,)."""
         return self._zenith_azimuth(-self.arrival_directions)
 
-    def objects(self, scene) -> np.ndarray:
+    def objects(self, scene: "Scene") -> np.ndarray:
         """(N, D) int64: object id of each interaction (-1 past the end)."""
         out = np.full(self.triangle.shape, -1, dtype=np.int64)
         m = self.triangle >= 0

@@ -23,6 +23,8 @@ import dataclasses
 from collections import Counter
 from typing import Callable
 
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from ..errors import WavepathsError
@@ -148,8 +150,8 @@ street canyon's 100-receiver query (70 k) ran 1.4x slower on two threads, ``etoi
 
 def trace(
     scene: Scene,
-    tx,
-    rx,
+    tx: ArrayLike,
+    rx: ArrayLike,
     options: TraceOptions | None = None,
     *,
     context: TxContext | None = None,
@@ -215,14 +217,14 @@ def trace(
     tx_face, rx_face = points_on_faces(scene, tx), points_on_faces(scene, rx)
     _warn_inside(scene, tx, rx, tx_face, rx_face)
     _warn_on_faces(scene, tx, rx, tx_face, rx_face)
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise WavepathsError(f"`threads` must be a positive integer, got {threads!r}")
     if context is not None:
         _check_context(context, scene, tx, opts)
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
     prepare_launched(scene, ctx, rx)  # launched candidates: the fans traced once for every tile
     stats: Counter = Counter(ctx.stats)
     batches = []
-    if threads is not None and int(threads) < 1:
-        raise WavepathsError(f"`threads` must be positive, got {threads}")
     n_threads = int(threads) if threads is not None else (
         kernels.threads() if len(rx) * sum(len(lv) for lv in ctx.levels) >= THREADS_MIN_WORK else 1)
     if opts.launched:

@@ -36,6 +36,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._vec import unit as _unit
+
 from ..scene.mesh_topology import _UnionFind
 from ..scene.polygon_query import points_in_polygons
 from .flatness import coplanar_entries, flat_widest_sector
@@ -112,11 +114,6 @@ class Dihedra:
     def faces(self, i: int) -> slice:
         """Slice of the face arrays belonging to dihedron ``i``."""
         return slice(int(self.face_ptr[i]), int(self.face_ptr[i + 1]))
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 0, n, 1.0)
 
 
 def _edges_inside_polygons(scene: "Scene", edge_a: np.ndarray, edge_b: np.ndarray):

@@ -14,8 +14,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ..search.paths import InteractionType, Paths
+from ..em.constants import SPEED_OF_LIGHT  # noqa: F401 (re-exported)
 
-SPEED_OF_LIGHT = 299_792_458.0
 
 
 DUPLICATE_TOL_M = 1e-2
@@ -48,7 +48,7 @@ class Comparison:
     only_sionna: list[dict] = field(default_factory=list)
 
     def summary(self) -> dict:
-        def stats(values, kind_filter=None):
+        def stats(values):
             # the extremes over the finite values, and how many were not finite (a path of
             # amplitude 0 on one side only: an infinite gain difference; a NaN amplitude)
             values = np.asarray(list(values), float)

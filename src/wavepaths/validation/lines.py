@@ -30,6 +30,7 @@ from ..fields import FieldConfig, compute_fields
 from ..scene import load_scene, write_mitsuba_xml
 from ..scene.builtin import AWNING_DEG
 from ..search import TraceOptions, trace
+from ..em.constants import SPEED_OF_LIGHT  # noqa: F401 (re-exported)
 
 S_PRIME = 10_000.0  # plane-wave approximation: curvature error k rho^2 / 2 s' ~ 4e-3
 LINE_SAMPLES = 1_000_000  # Sionna's samples per source on the lines
@@ -38,7 +39,6 @@ LINE_SAMPLES = 1_000_000  # Sionna's samples per source on the lines
 LINE_SAMPLES_FULL = {"half_plane": 1_000_000, "wedge": 10_000_000, "wedge_awning": 10_000_000}
 # the lines of the report, each with an exact solution
 LINES = ("half_plane", "wedge", "wedge_awning")
-SPEED_OF_LIGHT = 299_792_458.0
 # suffix of a curve label for the field of an engine's diffracted paths alone, and of the exact
 # solution minus its geometrical optics (:func:`~wavepaths.exact.wedge.wedge_geometrical_optics`)
 DIFFRACTED = " diffracted"
@@ -65,7 +65,7 @@ class BoundaryLine:
     settings: dict = field(default_factory=dict)  # what a reader needs to recompute the line
 
 
-def _u(geometry_dirs, vertices_list, a, lengths, rx_index, n_rx, k, polarization, s_prime):
+def _u(geometry_dirs, a, lengths, rx_index, n_rx, k, polarization, s_prime):
     """Normalised soft/hard field from single-port coefficients (see module docstring)."""
     x = np.array([1.0, 0.0, 0.0])
     out = np.zeros(n_rx, complex)
@@ -157,14 +157,14 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
                            ("wavepaths GTD", FieldConfig(frequency_hz, "gtd", tx_antenna=ant, rx_antenna=ant)),
                            ("wavepaths compat=sionna", FieldConfig(frequency_hz, "utd", "sionna", tx_antenna=ant, rx_antenna=ant))):
             r = compute_fields(scene, p, cfg)
-            curves[(label, pol)] = _u((p.departure_directions, p.arrival_directions), None, r.a, p.lengths,
+            curves[(label, pol)] = _u((p.departure_directions, p.arrival_directions), r.a, p.lengths,
                                       p.rx_index, len(rx), k, pol, S_PRIME)
             d = _diffracted(p.depth, p.interactions)
-            curves[(label + DIFFRACTED, pol)] = _u((p.departure_directions[d], p.arrival_directions[d]), None,
+            curves[(label + DIFFRACTED, pol)] = _u((p.departure_directions[d], p.arrival_directions[d]),
                                                    r.a[d], p.lengths[d], p.rx_index[d], len(rx), k, pol, S_PRIME)
             if label == "wavepaths UTD":  # the same UTD with its delays rounded as Sionna's are (float32)
                 rounded = np.float32(p.lengths / SPEED_OF_LIGHT).astype(np.float64) * SPEED_OF_LIGHT
-                float32_delays[pol] = _u((p.departure_directions, p.arrival_directions), None, r.a, rounded,
+                float32_delays[pol] = _u((p.departure_directions, p.arrival_directions), r.a, rounded,
                                          p.rx_index, len(rx), k, pol, S_PRIME)
         if with_sionna:
             from .sionna_runner import run_sionna_paths
@@ -181,10 +181,10 @@ def boundary_line(scene_name: str, out_dir: str, frequency_hz: float = 3.5e9, rh
             arr = v[rows, d + 1] - v[rows, d]
             dep /= np.linalg.norm(dep, axis=1, keepdims=True)
             arr /= np.linalg.norm(arr, axis=1, keepdims=True)
-            curves[("Sionna RT", pol)] = _u((dep, arr), None, sn.a[keep], sn.tau[keep] * SPEED_OF_LIGHT,
+            curves[("Sionna RT", pol)] = _u((dep, arr), sn.a[keep], sn.tau[keep] * SPEED_OF_LIGHT,
                                             sn.rx_index[keep], len(rx), k, pol, S_PRIME)
             dd = _diffracted(d, sn.interactions[keep])
-            curves[("Sionna RT" + DIFFRACTED, pol)] = _u((dep[dd], arr[dd]), None, sn.a[keep][dd],
+            curves[("Sionna RT" + DIFFRACTED, pol)] = _u((dep[dd], arr[dd]), sn.a[keep][dd],
                                                          sn.tau[keep][dd] * SPEED_OF_LIGHT, sn.rx_index[keep][dd],
                                                          len(rx), k, pol, S_PRIME)
             counts.setdefault("Sionna RT", {})[FIELD_OF_POLARIZATION[pol]] = _mechanism_counts(
