@@ -40,7 +40,7 @@ def launch_completeness(scene_name: str, tx, cells: int = 32, fans=(64, 256, 102
                         progress=print) -> dict:
     """Benchmark the launched candidates on ``scene_name`` (see module docstring)."""
     from ..coverage import PlanarGrid
-    from ..coverage.inside import inside_solid_objects, solid_objects
+    from ..scene.solids import inside_solid_objects, solid_objects
     from ..fields import FieldConfig, compute_fields
     from ..scene import load_scene
     from ..search import TraceOptions

@@ -106,7 +106,7 @@ def munich_sample(progress_file: str, cell_size: float = 2.0, options: dict | No
     import numpy as np
 
     from ..coverage import PlanarGrid
-    from ..coverage.inside import inside_solid_objects, solid_objects
+    from ..scene.solids import inside_solid_objects, solid_objects
     from ..coverage.solver import default_workers
     from ..scene import load_scene
     from ..search import TraceOptions
@@ -180,7 +180,7 @@ def munich_check(progress_file: str, cells: int = 32, seed: int = 7, cell_size: 
     import numpy as np
 
     from ..coverage import PlanarGrid
-    from ..coverage.inside import inside_solid_objects, solid_objects
+    from ..scene.solids import inside_solid_objects, solid_objects
     from ..fields import FieldConfig, compute_fields
     from ..scene import load_scene
     from ..search import TraceOptions, trace

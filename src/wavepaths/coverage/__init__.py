@@ -9,7 +9,7 @@ See ``docs/coverage.md``.
 """
 
 from .grid import MeshGrid, PlanarGrid
-from .inside import inside_solid_objects, solid_objects
+from ..scene.solids import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap, field_strength_dbuv_m
 from .solver import CoverageOptions, coverage, solve_tile
 

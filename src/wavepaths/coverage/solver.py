@@ -44,7 +44,7 @@ from ..search.tile import trace_tile
 from ..search.through_vertices import drop_crossed
 from ..search.trace import _warn_on_faces, check_positions, points_on_faces
 from .grid import Grid, MeshGrid, PlanarGrid
-from .inside import inside_solid_objects, solid_objects
+from ..scene.solids import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap
 from .surfaces import cells_on_faces, outside_solids, warn_cells_on_faces
 from .tolerance import tolerance_keep
@@ -88,7 +88,7 @@ class CoverageOptions:
         kernels use numba's threads themselves).
     mask_inside : bool
         Mark cells inside solid objects NaN and do not trace them
-        (:mod:`wavepaths.coverage.inside`). Turn off for scenes whose closed objects are
+        (:mod:`wavepaths.scene.solids`). Turn off for scenes whose closed objects are
         rooms to be covered from inside.
     max_memory_bytes : int
         Refuse maps whose result arrays would exceed this [bytes] (the tiles bound the

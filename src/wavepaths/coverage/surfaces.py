@@ -27,8 +27,8 @@ def cells_on_faces(scene: Scene, flat: np.ndarray, solids=None) -> tuple[np.ndar
 
     On a solid's surface: on a face of a closed object (:func:`~wavepaths.scene.closed.solid_objects_mask`),
     or where the face bounds a solid of the inside mask's own rule
-    (:func:`~wavepaths.coverage.inside.inside_solid_objects` with ``solids``, by default
-    :func:`~wavepaths.coverage.inside.solid_objects`, which spans objects): the points a few
+    (:func:`~wavepaths.scene.solids.inside_solid_objects` with ``solids``, by default
+    :func:`~wavepaths.scene.solids.solid_objects`, which spans objects): the points a few
     plane tolerances off the face on one side, tilted four ways along it (so that a cell on a
     building's corner reaches into it), meet a solid, and those on the other side do not. The
     second rule does not depend on how a file groups faces into objects or orients them (a
@@ -37,7 +37,7 @@ def cells_on_faces(scene: Scene, flat: np.ndarray, solids=None) -> tuple[np.ndar
     """
     from ..scene.closed import solid_objects_mask
     from ..search.on_faces import points_on_surfaces
-    from .inside import inside_solid_objects, solid_objects
+    from ..scene.solids import inside_solid_objects, solid_objects
 
     faces = points_on_faces(scene, flat)
     on_solid = np.zeros(len(flat), bool)

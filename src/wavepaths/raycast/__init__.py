@@ -13,7 +13,7 @@ triangle. Hence, by definition:
   below it); except where it runs with solid on both sides of that plane (the shared wall
   of two touching buildings, each with its own face there): entering there through a
   wall's edge, it passes through the buildings and is blocked (decided by the inside rule
-  of :mod:`wavepaths.coverage.inside`, ``ExactSegments._between_solids``);
+  of :mod:`wavepaths.scene.solids`, ``ExactSegments._between_solids``);
 * a segment grazing a face (passing near it without crossing its plane) is not blocked;
 * a segment crossing a face exactly through one of its edges or vertices is blocked
   (closed triangles: no ray leaks between the two triangles of a wall).

@@ -179,10 +179,10 @@ class ExactSegments:
         direction, ``n`` the plane's normal, ``h`` :attr:`contact_step`, four plane
         tolerances, and ``s`` as much or more, so that the points stand off the crossed
         face's plane too, at most half the segment left on that side) with wavepaths' one
-        inside rule (:func:`wavepaths.coverage.inside.inside_solid_objects`, float64 ray
+        inside rule (:func:`wavepaths.scene.solids.inside_solid_objects`, float64 ray
         parity). Only the few crossings the graze rule would let pass come here.
         """
-        from ..coverage.inside import inside_solid_objects, solid_objects
+        from ..scene.solids import inside_solid_objects, solid_objects
 
         if self._solids is None:
             self._solids = solid_objects(self._scene)

@@ -20,7 +20,7 @@ triangles of both orientations, or a closed object without volume) reflects on b
 sides; as two objects (or two materials), each copy reflects on its own front side. Its
 edge is a half-plane (n = 2) for the diffraction search, which works on the mesh's edges.
 
-"Is a point inside" is decided by the ray-parity rule of :mod:`wavepaths.coverage.inside`
+"Is a point inside" is decided by the ray-parity rule of :mod:`wavepaths.scene.solids`
 (three rays, float64), the same for coverage cells and for the sources here.
 """
 
@@ -144,7 +144,7 @@ def polygon_sides(scene: "Scene") -> np.ndarray:
         return sides
     contains = set(zip(ii.tolist(), qq.tolist()))
     # which sides of the inner polygons lie inside a solid (contact faces)
-    from ..coverage.inside import inside_solid_objects, solid_objects
+    from .solids import inside_solid_objects, solid_objects
 
     inner = np.unique(ii)
     x = _interior_points(scene, inner)
@@ -192,14 +192,14 @@ BOX_PAIRS = 1 << 20
 def points_inside_closed(scene: "Scene", points: np.ndarray) -> np.ndarray:
     """(k, objects) bool: whether each point lies inside each closed object with a volume.
 
-    The ray-parity rule of :mod:`wavepaths.coverage.inside` (three rays, majority, float64)
+    The ray-parity rule of :mod:`wavepaths.scene.solids` (three rays, majority, float64)
     applied to each such object alone, to the points within an object's bounding box
     (padded by the plane tolerance): a point outside every box lies inside none (the region
     a closed surface bounds is within its box; a point on the surface, where either answer
     may come, is within the padding). The receivers of a street-canyon coverage tile
     (1,024 cells at street level) then skip the parity test, which took 4 % of the map.
     """
-    from ..coverage.inside import SolidObjects, inside_solids
+    from .solids import SolidObjects, inside_solids
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     solid = np.nonzero(solid_objects_mask(scene))[0]

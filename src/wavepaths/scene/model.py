@@ -220,7 +220,7 @@ class Scene:
     @functools.cached_property
     def solid_object_mask(self) -> np.ndarray:
         """(objects,) bool, read-only in this process: the closed objects that enclose a volume
-        (not a double-sided sheet). :func:`wavepaths.coverage.inside.solid_objects` is their
+        (not a double-sided sheet). :func:`wavepaths.scene.solids.solid_objects` is their
         triangles, for the inside tests."""
         from .closed import compute_solid_objects_mask
 
