@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The test command of README.md: set up .venv (with Sionna RT), run the test suite, the
-# full validation against Sionna RT and the exact solutions (about 1.5 min; it fails when
+# full validation against Sionna RT and the exact solutions (about 10 min; it fails when
 # the report does: a path Sionna alone finds, a tolerance broken, wavepaths' UTD off the
 # exact solutions), then the CLI contract check when ../shared/checks/cli_contract.py is
 # present.
