@@ -190,7 +190,7 @@ def test_build_scene_refuses_malformed_arrays_and_ids_out_of_range():
 
 
 @pytest.mark.parametrize("kwargs", [{"weld": float("nan")}, {"coplanar_angle": -1.0}, {"ray_offset": -1e-6},
-                                    {"flat_angle": 2.0}, {"weld": "1e-6"}, {"plane_distance": True}])
+                                    {"flat_angle": 4.0}, {"weld": "1e-6"}, {"plane_distance": True}])
 def test_scene_tolerances_must_be_finite_and_in_range(kwargs):
     from wavepaths.errors import WavepathsError
     from wavepaths.scene import SceneTolerances

@@ -83,7 +83,7 @@ class SceneTolerances:
         for f in fields(self):
             v = getattr(self, f.name)
             angle = f.name.endswith("_angle")
-            top, unit = (math.pi / 2, "rad") if angle else (1.0, "of the scene's diagonal")
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 <= v < top):
-                raise WavepathsError(f"`{f.name}` must be a finite number in [0, {top:.4g}) {unit}, got {v!r}")
+            top, unit = (math.pi, "rad") if angle else (1.0, "of the scene's diagonal")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 <= v <= top):
+                raise WavepathsError(f"`{f.name}` must be a finite number in [0, {top:.4g}] {unit}, got {v!r}")
 
