@@ -272,14 +272,23 @@ def reflect(E, k_in, k_out, normal, material, kinds, etas, thick, slab):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _reflect_core(E, r, ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, m, kinds, etas, thick, slab):
-    """One row of :func:`reflect`: row ``r`` of ``E`` reflected on a face of normal ``n`` and material ``m``."""
+def _reflect_coeffs(ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, kind, eta, thk, slab):
+    # the Fresnel coefficients and the TE, incident TM and reflected TM unit vectors of a reflection
+    # (scalars only: an array argument of an inlined helper is reference-counted at every call)
     cos_t = abs(ki0 * n0 + ki1 * n1 + ki2 * n2)
     f0, f1, f2 = _perp_unit(n0, n1, n2, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
     s0, s1, s2 = _perp_unit(ki0, ki1, ki2, n0, n1, n2, f0, f1, f2)
     pi0, pi1, pi2 = s1 * ki2 - s2 * ki1, s2 * ki0 - s0 * ki2, s0 * ki1 - s1 * ki0
     pr0, pr1, pr2 = s1 * ko2 - s2 * ko1, s2 * ko0 - s0 * ko2, s0 * ko1 - s1 * ko0
-    r_te, r_tm = fresnel(kinds[m], etas[m], thick[m], slab, cos_t)
+    r_te, r_tm = fresnel(kind, eta, thk, slab, cos_t)
+    return r_te, r_tm, s0, s1, s2, pi0, pi1, pi2, pr0, pr1, pr2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _reflect_core(E, r, ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2, m, kinds, etas, thick, slab):
+    """One row of :func:`reflect`: row ``r`` of ``E`` reflected on a face of normal ``n`` and material ``m``."""
+    r_te, r_tm, s0, s1, s2, pi0, pi1, pi2, pr0, pr1, pr2 = _reflect_coeffs(ki0, ki1, ki2, ko0, ko1, ko2, n0, n1, n2,
+                                                                           kinds[m], etas[m], thick[m], slab)
     for p in range(E.shape[1]):
         e0, e1, e2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
         es = r_te * (e0 * s0 + e1 * s1 + e2 * s2)
@@ -306,9 +315,28 @@ def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y
     angles, ``L``, the faces' materials. The Jones matrix is
     :func:`wavepaths.em.utd.diffraction_jones_matrices`' with the faces' reflections of
     :func:`wavepaths.em.wedge_faces.wedge_reflection_matrices` (:func:`_edge_reflection`)."""
+    (j00, j01, j10, j11, bi0, bi1, bi2, pi0, pi1, pi2, bo0, bo1, bo2, po0, po1,
+     po2) = _diffract_coeffs(addr, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y, phi, phi_prime, b0, nr, L, k,
+                             floor, kinds[m0], etas[m0], thick[m0], kinds[mn], etas[mn], thick[mn], slab)
+    for p in range(E.shape[1]):
+        x0, x1, x2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
+        cb = x0 * bi0 + x1 * bi1 + x2 * bi2
+        cp = x0 * pi0 + x1 * pi1 + x2 * pi2
+        ob = j00 * cb + j01 * cp
+        op = j10 * cb + j11 * cp
+        E[r, p, 0] = ob * bo0 + op * po0
+        E[r, p, 1] = ob * bo1 + op * po1
+        E[r, p, 2] = ob * bo2 + op * po2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _diffract_coeffs(addr, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y, phi, phi_prime, b0, nr, L, k, floor,
+                     kind0, eta0, thk0, kindn, etan, thkn, slab):
+    # _diffract_core's Jones matrix J and its bases (b0', phi') of s_in, (b0, phi) of s_out, from
+    # scalars only (the faces' materials as their kind, eta and thickness)
     sb = abs(math.sin(b0))
-    r0_s, r0_h = fresnel(kinds[m0], etas[m0], thick[m0], slab, sb * abs(math.sin(phi_prime)))
-    rn_s, rn_h = fresnel(kinds[mn], etas[mn], thick[mn], slab, sb * abs(math.sin(nr * math.pi - phi)))
+    r0_s, r0_h = fresnel(kind0, eta0, thk0, slab, sb * abs(math.sin(phi_prime)))
+    rn_s, rn_h = fresnel(kindn, etan, thkn, slab, sb * abs(math.sin(nr * math.pi - phi)))
     base, d4, d3 = luebbers_terms(addr, phi, phi_prime, b0, nr, k, L, floor)
     pi0, pi1, pi2 = _perp_unit(a0, a1, a2, e0, e1, e2, f0, f1, f2)
     bi0, bi1, bi2 = a1 * pi2 - a2 * pi1, a2 * pi0 - a0 * pi2, a0 * pi1 - a1 * pi0
@@ -336,15 +364,7 @@ def _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, f0, f1, f2, y
     j01 = -(d4 * g01 + d3 * h01)
     j10 = -(d4 * g10 + d3 * h10)
     j11 = -((d4 * g11 + d3 * h11) + base)
-    for p in range(E.shape[1]):
-        x0, x1, x2 = E[r, p, 0], E[r, p, 1], E[r, p, 2]
-        cb = x0 * bi0 + x1 * bi1 + x2 * bi2
-        cp = x0 * pi0 + x1 * pi1 + x2 * pi2
-        ob = j00 * cb + j01 * cp
-        op = j10 * cb + j11 * cp
-        E[r, p, 0] = ob * bo0 + op * po0
-        E[r, p, 1] = ob * bo1 + op * po1
-        E[r, p, 2] = ob * bo2 + op * po2
+    return j00, j01, j10, j11, bi0, bi1, bi2, pi0, pi1, pi2, bo0, bo1, bo2, po0, po1, po2
 
 
 @numba.njit(cache=True, nogil=True)
@@ -405,19 +425,27 @@ def wedge_geometry(vertices, rows, j, dihedron, face_0, face_n, direction, face_
 def _wedge_core(vertices, i, j, d, f0, fn, direction, face_direction):
     """One row of :func:`wedge_geometry`: ``(e, s_in, s_out`` as 3 scalars each``, phi,
     phi_prime, beta_0, n)`` of the diffraction at interaction ``j`` of path ``i``."""
-    e0, e1, e2 = direction[d, 0], direction[d, 1], direction[d, 2]
-    x0, x1, x2 = face_direction[f0, 0], face_direction[f0, 1], face_direction[f0, 2]
+    return _wedge_scalars(direction[d, 0], direction[d, 1], direction[d, 2], face_direction[f0, 0],
+                          face_direction[f0, 1], face_direction[f0, 2], face_direction[fn, 0], face_direction[fn, 1],
+                          face_direction[fn, 2], vertices[i, j, 0], vertices[i, j, 1], vertices[i, j, 2],
+                          vertices[i, j + 1, 0], vertices[i, j + 1, 1], vertices[i, j + 1, 2], vertices[i, j + 2, 0],
+                          vertices[i, j + 2, 1], vertices[i, j + 2, 2])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _wedge_scalars(e0, e1, e2, x0, x1, x2, w0, w1, w2, v0, v1, v2, p0, p1, p2, n0, n1, n2):
+    # _wedge_core from scalars: the edge e, the 0-face and n-face directions x and w, the previous
+    # vertex v, the diffraction point p and the next vertex n
     y0, y1, y2 = e1 * x2 - e2 * x1, e2 * x0 - e0 * x2, e0 * x1 - e1 * x0
-    p0, p1, p2 = vertices[i, j + 1, 0], vertices[i, j + 1, 1], vertices[i, j + 1, 2]
-    a0, a1, a2 = vertices[i, j, 0] - p0, vertices[i, j, 1] - p1, vertices[i, j, 2] - p2  # prev - p
-    b0, b1, b2 = vertices[i, j + 2, 0] - p0, vertices[i, j + 2, 1] - p1, vertices[i, j + 2, 2] - p2  # nxt - p
+    a0, a1, a2 = v0 - p0, v1 - p1, v2 - p2  # prev - p
+    b0, b1, b2 = n0 - p0, n1 - p1, n2 - p2  # nxt - p
     la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     lb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
     la = la if la > 0.0 else 1.0
     lb = lb if lb > 0.0 else 1.0
     si0, si1, si2 = -a0 / la, -a1 / la, -a2 / la  # unit(p - prev)
     so0, so1, so2 = b0 / lb, b1 / lb, b2 / lb
-    w = _angle(face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2], x0, x1, x2, y0, y1, y2)
+    w = _angle(w0, w1, w2, x0, x1, x2, y0, y1, y2)
     nn = (2.0 * math.pi if w < 1e-9 else w) / math.pi
     pp = _angle(a0, a1, a2, x0, x1, x2, y0, y1, y2)
     ph = _angle(b0, b1, b2, x0, x1, x2, y0, y1, y2)
@@ -431,74 +459,107 @@ REFLECTION = 1  # wavepaths.search.paths.InteractionType
 DIFFRACTION = 2
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
-               poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
-               boundary_eps):
-    # wavepaths.fields.chain.path_field_vectors for row r, with the kernels above; see chain_fields
+@numba.njit(cache=True, nogil=True)
+def _chain_rows(lo, hi, addr, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
+                poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
+                boundary_eps):
+    # wavepaths.fields.chain.path_field_vectors for rows lo to hi, with the kernels above; see
+    # chain_fields. The arrays are read here and the helpers take scalars: an array passed to an
+    # inlined helper is reference-counted (two atomic operations) at every call
     D = interactions.shape[1]
-    total = 0.0
-    for s in range(D + 1):  # left to right, as numpy's sum over fewer than 8 columns
-        total += seg[r, s]
-    if not total > 0.0:
-        deferred[r] = True  # a path of length 0: the numpy chain's 1 / 0
-        return
-    spreading[r] = 1.0 / total
-    for j in range(D):
-        kind = interactions[r, j]
-        if kind == REFLECTION:
-            l0 = seg[r, j] if seg[r, j] > 0 else 1.0
-            l1 = seg[r, j + 1] if seg[r, j + 1] > 0 else 1.0
-            p = primitive[r, j]
-            _reflect_core(E, r, (vertices[r, j + 1, 0] - vertices[r, j, 0]) / l0,
-                          (vertices[r, j + 1, 1] - vertices[r, j, 1]) / l0,
-                          (vertices[r, j + 1, 2] - vertices[r, j, 2]) / l0,
-                          (vertices[r, j + 2, 0] - vertices[r, j + 1, 0]) / l1,
-                          (vertices[r, j + 2, 1] - vertices[r, j + 1, 1]) / l1,
-                          (vertices[r, j + 2, 2] - vertices[r, j + 1, 2]) / l1,
-                          poly_normal[p, 0], poly_normal[p, 1], poly_normal[p, 2], poly_material[p], kinds, etas,
-                          thick, slab)
-        elif kind == DIFFRACTION:
-            f0, fn = wedge_faces[r, 0], wedge_faces[r, 1]
-            (e0, e1, e2, a0, a1, a2, o0, o1, o2, ph, pp, b0,
-             nn) = _wedge_core(vertices, r, j, primitive[r, j], f0, fn, direction, face_direction)
-            s_before = seg[r, 0]
-            for s in range(1, j + 1):
-                s_before += seg[r, s]
-            s_after = 0.0
-            for s in range(j + 1, D + 1):
-                s_after += seg[r, s]
-            # wavepaths.fields.chain._on_boundary_sides: near a shadow or reflection boundary the
-            # term takes the side of the geometrical-optics path, which needs the other paths: left
-            # to the numpy chain, as are angles the UTD refuses
-            margin = max(delta / max(min(s_before, s_after), 1e-300), boundary_eps)
-            if (abs(abs(ph - pp) - math.pi) < margin or abs(ph + pp - math.pi) < margin
-                    or abs(ph + pp - (2 * nn - 1) * math.pi) < margin):
-                deferred[r] = True
-                return
-            if not (math.isfinite(ph) and math.isfinite(pp) and math.isfinite(b0) and 1.0 < nn <= 2.0):
-                deferred[r] = True
-                return
-            if not (s_before > 0.0 and s_after > 0.0):
-                deferred[r] = True  # an edge at an end of the path: the numpy chain's 1 / 0
-                return
-            if pp > ph:
-                # wavepaths.fields.chain._reciprocal_face_order: the faces exchanged, so that
-                # phi' <= phi (Luebbers' coefficient reciprocal)
-                f0, fn = fn, f0
-                ph, pp = nn * math.pi - ph, nn * math.pi - pp
-                e0, e1, e2 = -e0, -e1, -e2
-                b0 = math.pi - b0
-            sin_b = max(abs(math.sin(b0)), floor)
-            L = s_before * s_after / (s_before + s_after) * sin_b ** 2
-            if not (L >= 0.0 and math.isfinite(L)):
-                deferred[r] = True
-                return
-            _diffract_core(addr, E, r, e0, e1, e2, a0, a1, a2, o0, o1, o2, face_direction[f0, 0],
-                           face_direction[f0, 1], face_direction[f0, 2],
-                           (face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2]), ph, pp, b0, nn, L, k,
-                           floor, face_material[f0], face_material[fn], kinds, etas, thick, slab)
-            spreading[r] = 1.0 / math.sqrt(s_before * s_after * (s_before + s_after))
+    P = E.shape[1]
+    for r in range(lo, hi):
+        total = 0.0
+        for s in range(D + 1):  # left to right, as numpy's sum over fewer than 8 columns
+            total += seg[r, s]
+        if not total > 0.0:
+            deferred[r] = True  # a path of length 0: the numpy chain's 1 / 0
+            continue
+        spreading[r] = 1.0 / total
+        for j in range(D):
+            kind = interactions[r, j]
+            if kind == REFLECTION:
+                l0 = seg[r, j] if seg[r, j] > 0 else 1.0
+                l1 = seg[r, j + 1] if seg[r, j + 1] > 0 else 1.0
+                p = primitive[r, j]
+                m = poly_material[p]
+                r_te, r_tm, s0, s1, s2, pi0, pi1, pi2, pr0, pr1, pr2 = _reflect_coeffs(
+                    (vertices[r, j + 1, 0] - vertices[r, j, 0]) / l0,
+                    (vertices[r, j + 1, 1] - vertices[r, j, 1]) / l0,
+                    (vertices[r, j + 1, 2] - vertices[r, j, 2]) / l0,
+                    (vertices[r, j + 2, 0] - vertices[r, j + 1, 0]) / l1,
+                    (vertices[r, j + 2, 1] - vertices[r, j + 1, 1]) / l1,
+                    (vertices[r, j + 2, 2] - vertices[r, j + 1, 2]) / l1,
+                    poly_normal[p, 0], poly_normal[p, 1], poly_normal[p, 2], kinds[m], etas[m], thick[m], slab)
+                for q in range(P):
+                    x0, x1, x2 = E[r, q, 0], E[r, q, 1], E[r, q, 2]
+                    es = r_te * (x0 * s0 + x1 * s1 + x2 * s2)
+                    ep = r_tm * (x0 * pi0 + x1 * pi1 + x2 * pi2)
+                    E[r, q, 0] = es * s0 + ep * pr0
+                    E[r, q, 1] = es * s1 + ep * pr1
+                    E[r, q, 2] = es * s2 + ep * pr2
+            elif kind == DIFFRACTION:
+                f0, fn = wedge_faces[r, 0], wedge_faces[r, 1]
+                d = primitive[r, j]
+                (e0, e1, e2, a0, a1, a2, o0, o1, o2, ph, pp, b0, nn) = _wedge_scalars(
+                    direction[d, 0], direction[d, 1], direction[d, 2], face_direction[f0, 0], face_direction[f0, 1],
+                    face_direction[f0, 2], face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2],
+                    vertices[r, j, 0], vertices[r, j, 1], vertices[r, j, 2], vertices[r, j + 1, 0],
+                    vertices[r, j + 1, 1], vertices[r, j + 1, 2], vertices[r, j + 2, 0], vertices[r, j + 2, 1],
+                    vertices[r, j + 2, 2])
+                s_before = seg[r, 0]
+                for s in range(1, j + 1):
+                    s_before += seg[r, s]
+                s_after = 0.0
+                for s in range(j + 1, D + 1):
+                    s_after += seg[r, s]
+                # wavepaths.fields.chain._on_boundary_sides: near a shadow or reflection boundary the
+                # term takes the side of the geometrical-optics path, which needs the other paths: left
+                # to the numpy chain, as are angles the UTD refuses
+                margin = max(delta / max(min(s_before, s_after), 1e-300), boundary_eps)
+                if (abs(abs(ph - pp) - math.pi) < margin or abs(ph + pp - math.pi) < margin
+                        or abs(ph + pp - (2 * nn - 1) * math.pi) < margin):
+                    deferred[r] = True
+                    break
+                if not (math.isfinite(ph) and math.isfinite(pp) and math.isfinite(b0) and 1.0 < nn <= 2.0):
+                    deferred[r] = True
+                    break
+                if not (s_before > 0.0 and s_after > 0.0):
+                    deferred[r] = True  # an edge at an end of the path: the numpy chain's 1 / 0
+                    break
+                if pp > ph:
+                    # wavepaths.fields.chain._reciprocal_face_order: the faces exchanged, so that
+                    # phi' <= phi (Luebbers' coefficient reciprocal)
+                    f0, fn = fn, f0
+                    ph, pp = nn * math.pi - ph, nn * math.pi - pp
+                    e0, e1, e2 = -e0, -e1, -e2
+                    b0 = math.pi - b0
+                sin_b = max(abs(math.sin(b0)), floor)
+                L = s_before * s_after / (s_before + s_after) * sin_b ** 2
+                if not (L >= 0.0 and math.isfinite(L)):
+                    deferred[r] = True
+                    break
+                m0, mn = face_material[f0], face_material[fn]
+                (j00, j01, j10, j11, bi0, bi1, bi2, pi0, pi1, pi2, bo0, bo1, bo2, po0, po1,
+                 po2) = _diffract_coeffs(addr, e0, e1, e2, a0, a1, a2, o0, o1, o2, face_direction[f0, 0],
+                                         face_direction[f0, 1], face_direction[f0, 2],
+                                         (face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2]), ph,
+                                         pp, b0, nn, L, k, floor, kinds[m0], etas[m0], thick[m0], kinds[mn],
+                                         etas[mn], thick[mn], slab)
+                for q in range(P):
+                    x0, x1, x2 = E[r, q, 0], E[r, q, 1], E[r, q, 2]
+                    cb = x0 * bi0 + x1 * bi1 + x2 * bi2
+                    cp = x0 * pi0 + x1 * pi1 + x2 * pi2
+                    ob = j00 * cb + j01 * cp
+                    op = j10 * cb + j11 * cp
+                    E[r, q, 0] = ob * bo0 + op * po0
+                    E[r, q, 1] = ob * bo1 + op * po1
+                    E[r, q, 2] = ob * bo2 + op * po2
+                spreading[r] = 1.0 / math.sqrt(s_before * s_after * (s_before + s_after))
+
+
+CHAIN_CHUNK = 256
+"""Paths per call of :func:`_chain_rows` on numba's threads."""
 
 
 @numba.njit(cache=True, nogil=True)
@@ -515,10 +576,9 @@ def chain_fields(addr, E, spreading, deferred, vertices, seg, interactions, prim
     (at least ``boundary_eps``) of a shadow or reflection boundary, or with angles the UTD
     refuses, marks the path ``deferred`` and leaves its row: the numpy chain takes it.
     """
-    for r in range(E.shape[0]):
-        _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
-                   poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
-                   boundary_eps)
+    _chain_rows(0, E.shape[0], addr, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces,
+                poly_normal, poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k,
+                floor, delta, boundary_eps)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -526,7 +586,8 @@ def chain_fields_parallel(addr, E, spreading, deferred, vertices, seg, interacti
                           poly_normal, poly_material, direction, face_direction, face_material, kinds, etas, thick,
                           slab, k, floor, delta, boundary_eps):
     """:func:`chain_fields` with the paths on numba's threads (each path is independent)."""
-    for r in numba.prange(E.shape[0]):
-        _chain_row(addr, r, E, spreading, deferred, vertices, seg, interactions, primitive, wedge_faces, poly_normal,
-                   poly_material, direction, face_direction, face_material, kinds, etas, thick, slab, k, floor, delta,
-                   boundary_eps)
+    n = E.shape[0]
+    for c in numba.prange((n + CHAIN_CHUNK - 1) // CHAIN_CHUNK):
+        _chain_rows(c * CHAIN_CHUNK, min(n, (c + 1) * CHAIN_CHUNK), addr, E, spreading, deferred, vertices, seg,
+                    interactions, primitive, wedge_faces, poly_normal, poly_material, direction, face_direction,
+                    face_material, kinds, etas, thick, slab, k, floor, delta, boundary_eps)

@@ -7,7 +7,7 @@ re-exports them, so that callers reach them as ``_numba.<kernel>`` (looked up at
 time):
 
 * :mod:`wavepaths.search._numba_end_sides`: the receiver side's pair tests
-  (:func:`receiver_pairs`, :func:`receiver_pairs_serial`, with ``_receiver_row`` and
+  (:func:`receiver_pairs`, :func:`receiver_pairs_serial`, with ``_receiver_rows`` and
   ``ROWS``, which :mod:`wavepaths.search._numba_reach` shares) and the end sides' frame and
   sector lookup (:func:`end_sides`);
 * :mod:`wavepaths.search._numba_beams`: the beams through the chains' mirrors
@@ -29,12 +29,12 @@ The other compiled loops are imported from their own modules: ``_numba_reach``,
 from ._numba_beams import chain_side_planes, chains_edges, reflection_pairs, reflection_pairs_flat
 from ._numba_chains import degenerate_chains
 from ._numba_diffraction import diffraction_vertices, joined_candidates, keller_cone_keep
-from ._numba_end_sides import ROWS, _receiver_row, end_sides, receiver_pairs, receiver_pairs_serial
+from ._numba_end_sides import ROWS, _receiver_rows, end_sides, receiver_pairs, receiver_pairs_serial
 from ._numba_images import admissible, backtrace
 from ._numba_order import _counting_sort, key_length_order
 
 __all__ = [
-    "ROWS", "_counting_sort", "_receiver_row", "admissible", "backtrace", "chain_side_planes", "chains_edges",
+    "ROWS", "_counting_sort", "_receiver_rows", "admissible", "backtrace", "chain_side_planes", "chains_edges",
     "degenerate_chains", "diffraction_vertices", "end_sides", "joined_candidates", "keller_cone_keep",
     "key_length_order", "receiver_pairs", "receiver_pairs_serial", "reflection_pairs", "reflection_pairs_flat",
 ]

@@ -8,7 +8,7 @@ import math
 import numba
 import numpy as np
 
-from ._numba import ROWS, _receiver_row
+from ._numba import ROWS, _receiver_rows
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -82,9 +82,9 @@ def _group(g, order, gstart, gq, I, n, off, side, A, B, plane_tol, mirror, to_q,
     # the images order[gstart[g]:gstart[g + 1]], which share their last mirror gq[g] and the
     # side of their previous images: the edges of the mirror's reach list that are among the
     # chunk's columns, and (with `mirror`) on that side, the mirror-side test of
-    # _numba._receiver_row once per edge for the whole group (its expression, with the first
+    # _numba._receiver_rows once per edge for the whole group (its expression, with the first
     # image's plane, which every image of the group shares), are gathered into contiguous
-    # arrays; then _receiver_row runs over them for each image (the other tests, in the same
+    # arrays; then _receiver_rows runs over them, image by image (the other tests, in the same
     # order, vectorised); the survivors, mapped back to the chunk's columns, end at
     # out_j[start[i]:start[i] + cnt[i]], and counts[i, 4] += the listed pairs
     q = gq[g]
@@ -125,17 +125,9 @@ def _group(g, order, gstart, gq, I, n, off, side, A, B, plane_tol, mirror, to_q,
     buf = np.empty(m, np.int64)
     fm = np.ones(m, np.uint8)
     fb = np.ones(m, np.uint8)
-    for r in range(gstart[g], gstart[g + 1]):
-        i = order[r]
-        c = _receiver_row(i, buf, fm, fb, I, n, off, side, Ag, Bg, plane_tol, False, to_q, dist_q, radius_q, Mg, hg,
-                          beam, planes, aperture_tol, R, og, dg, xg, yg, vlo_g, lo_g, vhi_g, hi_g, keller_tol, window,
-                          counts)
-        base = start[i]
-        for k in range(c):
-            out_j[base + k] = cols[buf[k]]
-        cnt[i] = c
-        counts[i, 0] += listed - m
-        counts[i, 4] += listed
+    _receiver_rows(order, gstart[g], gstart[g + 1], buf, fm, fb, I, n, off, side, Ag, Bg, plane_tol, False, to_q,
+                   dist_q, radius_q, Mg, hg, beam, planes, aperture_tol, R, og, dg, xg, yg, vlo_g, lo_g, vhi_g, hi_g,
+                   keller_tol, window, counts, cnt, np.empty((0, 0), np.int64), out_j, start, cols, listed)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
