@@ -546,7 +546,8 @@ def _chain_rows(lo, hi, addr, E, spreading, deferred, vertices, seg, interaction
                                          (face_direction[fn, 0], face_direction[fn, 1], face_direction[fn, 2]), ph,
                                          pp, b0, nn, L, k, floor, kinds[m0], etas[m0], thick[m0], kinds[mn],
                                          etas[mn], thick[mn], slab)
-                for q in range(P):
+                for q in range(P):  # _diffract_core's loop, written out: an array given to a helper is
+                    # reference-counted at every call (two atomic operations per array and path)
                     x0, x1, x2 = E[r, q, 0], E[r, q, 1], E[r, q, 2]
                     cb = x0 * bi0 + x1 * bi1 + x2 * bi2
                     cp = x0 * pi0 + x1 * pi1 + x2 * pi2
