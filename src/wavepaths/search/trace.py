@@ -23,9 +23,8 @@ import dataclasses
 from collections import Counter
 from typing import Callable
 
-from numpy.typing import ArrayLike
-
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import WavepathsError
 from ..scene.model import Scene
@@ -208,6 +207,8 @@ def trace(
     if opts.tolerance_db is not None:
         raise WavepathsError("`tolerance_db` applies to coverage maps only (it needs the fields of the other paths); "
                              "use `prune_db` with `prune_frequency_hz` for a path query")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise WavepathsError(f"`threads` must be a positive integer, got {threads!r}")
     tx = check_positions("tx", tx)
     rx = check_positions("rx", rx)
     diff = np.linalg.norm(tx[:, None, :] - rx[None, :, :], axis=2)
@@ -217,8 +218,6 @@ def trace(
     tx_face, rx_face = points_on_faces(scene, tx), points_on_faces(scene, rx)
     _warn_inside(scene, tx, rx, tx_face, rx_face)
     _warn_on_faces(scene, tx, rx, tx_face, rx_face)
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
-        raise WavepathsError(f"`threads` must be a positive integer, got {threads!r}")
     if context is not None:
         _check_context(context, scene, tx, opts)
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
