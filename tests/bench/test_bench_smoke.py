@@ -43,8 +43,13 @@ def test_point_search_benchmark_figures():
     r = run_point_search(n_pairs=200, repeats=2, rounds=2, numerical_repeats=2, scalar_pairs=20)
     for key in ("point_search_ns", "point_search_speedup", "point_search_max_point_distance_m", "methods"):
         assert key in r
-    assert r["point_search_max_point_distance_m"] < 1e-9
-    assert r["methods"]["newton"]["agreement_with_closed_form"]["on_edge_disagreements"] == 0
+    # the Newton searches stop at a 1e-11 m step; golden section locates the flat minimum only to
+    # about sqrt(eps) of the scale. Which one is fastest on 200 pairs is the timing's noise, so the
+    # headline distance is held to the loosest of the three
+    for name, tol in (("newton", 1e-9), ("newton_reduced", 1e-9), ("golden", 1e-5)):
+        agreement = r["methods"][name]["agreement_with_closed_form"]
+        assert agreement["max_point_distance_m"] < tol and agreement["on_edge_disagreements"] == 0, name
+    assert r["point_search_max_point_distance_m"] < 1e-5
     assert r["point_search_ns"] > 0 and r["point_search_speedup"] > 0
 
 
