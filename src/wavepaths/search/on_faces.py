@@ -187,13 +187,13 @@ def _shells(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
 def _triangle_sides(v: np.ndarray, n: np.ndarray, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """In-plane unit normals (m, 3, 3) of the sides of triangles ``v`` (m, 3, 3) of normals ``n``,
     pointing into them (side i from vertex i to i + 1), and ``point``'s distances (m, 3) to the
-    sides' lines, positive inside."""
+    sides' lines, positive inside: one point (3,) for every triangle, or one per triangle (m, 3)."""
     sides = np.roll(v, -1, axis=1) - v
     inward = np.cross(n[:, None, :], sides)
     inward /= np.maximum(np.linalg.norm(inward, axis=2, keepdims=True), 1e-300)
     toward = np.einsum("mij,mij->mi", np.roll(v, -2, axis=1) - v, inward)
     inward *= np.where(toward < 0, -1.0, 1.0)[..., None]
-    return inward, np.einsum("mij,mij->mi", point[None, None, :] - v, inward)
+    return inward, np.einsum("mij,mij->mi", np.asarray(point)[..., None, :] - v, inward)
 
 
 def _surface_cone(point: np.ndarray, faces: list[tuple], tol: float) -> SurfaceCone:
@@ -287,14 +287,7 @@ def _strictly_inside(scene: Scene, points: np.ndarray, polygons: np.ndarray, out
     row = np.repeat(np.arange(len(polygons)), cnt)
     first = np.repeat(ptr[polygons], cnt)
     t = tris[first + np.arange(len(row)) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
-    v = scene.vertices[scene.triangles[t]]
-    n = outward[t]
-    sides = np.roll(v, -1, axis=1) - v
-    inward = np.cross(n[:, None, :], sides)
-    inward /= np.maximum(np.linalg.norm(inward, axis=2, keepdims=True), 1e-300)
-    toward = np.einsum("mij,mij->mi", np.roll(v, -2, axis=1) - v, inward)
-    inward *= np.where(toward < 0, -1.0, 1.0)[..., None]
-    dist = np.einsum("mij,mij->mi", points[row][:, None, :] - v, inward)
+    _, dist = _triangle_sides(scene.vertices[scene.triangles[t]], outward[t], points[row])
     strict = np.all(dist > tol, axis=1)
     inside = np.bincount(row[strict], minlength=len(polygons)) > 0
     return inside, outward[tris[ptr[polygons]]]
