@@ -23,14 +23,14 @@ def test_inside_mask_is_cached_per_scene_and_grid_and_bounded():
     again = coverage(scene, [[-30.0, 0.0, 10.0]], grid, opts, settings=settings)
     fresh = inside_solid_objects(scene, grid.cell_centers().reshape(-1, 3)).reshape(first.inside.shape)
     assert first.inside.any() and np.array_equal(first.inside, fresh) and np.array_equal(again.inside, fresh)
-    cache = scene.__dict__["_coverage_cache"]
-    assert sum(k.startswith("inside:") for k in cache) == 1
+    cache = scene.__dict__["_memo"]
+    assert sum(k[0] == "inside" for k in cache if isinstance(k, tuple)) == 1
     for i in range(INSIDE_CACHE_SIZE + 2):
         # (a quarter metre off the integers: no cell centre on a wall, which would warn)
         g = PlanarGrid(center=[float(i) + 0.25, 0.25], height=1.5, size=[20.0, 20.0], cell_size=4.0)
         m = coverage(scene, [[-60.0, 0.0, 10.0]], g, opts, settings=settings)
         assert np.array_equal(m.inside, inside_solid_objects(scene, g.cell_centers().reshape(-1, 3)).reshape(m.inside.shape))
-    assert sum(k.startswith("inside:") for k in cache) == INSIDE_CACHE_SIZE
+    assert sum(k[0] == "inside" for k in cache if isinstance(k, tuple)) == INSIDE_CACHE_SIZE
 
 
 def test_a_tiles_sums_in_path_order_equal_the_sums_of_the_sorted_paths():

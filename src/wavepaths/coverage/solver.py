@@ -311,21 +311,22 @@ INSIDE_CACHE_SIZE = 8
 
 
 def _cached(scene: "Scene", key: str, make):
-    """A value cached on the scene object, like its dihedra: the solids, and the inside mask of
-    a set of cell centres and the faces they lie on (keyed by their bytes), which do not depend
-    on the transmitters or the options, so a second map on the same grid skips the ray-parity
-    and on-face tests. At most :data:`INSIDE_CACHE_SIZE` of each are kept."""
-    cache = scene.__dict__.setdefault("_coverage_cache", {})
-    if key not in cache:
-        kind = key.partition(":")[0] + ":"  # "inside:" masks, "onface:" faces: per grid, a few kept
-        masks = [k for k in cache if k.startswith(kind)]
-        if ":" in key and len(masks) >= INSIDE_CACHE_SIZE:
-            del cache[masks[0]]
+    """A value kept on the scene object (:meth:`~wavepaths.scene.model.Scene.memo`), like its
+    dihedra: the solids, and the inside mask of a set of cell centres and the faces they lie on
+    (keyed ``"inside:<digest of their bytes>"``), which do not depend on the transmitters or the
+    options, so a second map on the same grid skips the ray-parity and on-face tests. At most
+    :data:`INSIDE_CACHE_SIZE` masks of each kind are kept."""
+    kind, _, grid = key.partition(":")  # "inside:" masks, "onface:" faces: per grid, a few kept
+
+    def frozen():
         value = make()
         if isinstance(value, np.ndarray):
             value.setflags(write=False)
-        cache[key] = value
-    return cache[key]
+        return value
+
+    if not grid:
+        return scene.memo(("coverage", kind), frozen)
+    return scene.memo((kind, grid), frozen, keep=INSIDE_CACHE_SIZE)
 
 
 def _warn_unbounded_pruning(opts: TraceOptions, cfg: FieldConfig) -> None:

@@ -92,19 +92,16 @@ def material_tables(scene: "Scene", cfg: "FieldConfig", used: np.ndarray) -> tup
     thick = np.zeros(m, np.float64)
     # a material's row depends on the material and the frequency only: kept on the scene (as
     # its dihedra are), keyed by the (frozen) material, so a coverage map's tiles compute it once
-    memo = scene.__dict__.setdefault("_material_rows", {})
+
+    def row(mat) -> tuple:
+        kind = codes.get(mat.kind, _numba.KIND_DIELECTRIC)
+        if kind == _numba.KIND_DIELECTRIC:
+            return kind, complex(relative_permittivity(mat, cfg.frequency_hz)), float(mat.thickness_m) / cfg.wavelength
+        return kind, 1.0 + 0j, 0.0
+
     for i in np.flatnonzero(np.bincount(used, minlength=m)).tolist():  # np.unique's materials, without its sort
         mat = scene.materials[i]
-        key = (mat, cfg.frequency_hz)
-        row = memo.get(key)
-        if row is None:
-            kind = codes.get(mat.kind, _numba.KIND_DIELECTRIC)
-            if kind == _numba.KIND_DIELECTRIC:
-                row = (kind, complex(relative_permittivity(mat, cfg.frequency_hz)), float(mat.thickness_m) / cfg.wavelength)
-            else:
-                row = (kind, 1.0 + 0j, 0.0)
-            memo[key] = row
-        kinds[i], etas[i], thick[i] = row
+        kinds[i], etas[i], thick[i] = scene.memo(("material_row", mat, cfg.frequency_hz), lambda: row(mat))
     return kinds, etas, thick
 
 

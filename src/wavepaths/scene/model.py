@@ -8,10 +8,11 @@ stage: the dihedra (:mod:`wavepaths.topology`), the ray caster
 from __future__ import annotations
 
 import functools
+import threading
 import warnings
 from dataclasses import dataclass, field
 from dataclasses import fields as dataclass_fields
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, Hashable, TypeVar
 
 import numpy as np
 
@@ -28,6 +29,58 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..raycast import RayCaster
     from ..search.mirror_visibility import PolygonHulls
     from ..topology.dihedra import Dihedra
+
+
+T = TypeVar("T")
+
+
+class _ValueLocks:
+    """One re-entrant lock per cached value of one scene, made on first use.
+
+    A lock per value, not one per scene: a value's computation may run threads that need
+    another value (never the same one, which would recurse). Pickled and copied as a fresh
+    set of locks.
+    """
+
+    __slots__ = ("_guard", "_locks")
+
+    def __init__(self) -> None:
+        self._guard = threading.Lock()
+        self._locks: dict = {}
+
+    def __call__(self, key: Hashable) -> threading.RLock:
+        with self._guard:
+            lock = self._locks.get(key)
+            if lock is None:
+                lock = self._locks[key] = threading.RLock()
+            return lock
+
+    def __reduce__(self):
+        return (_ValueLocks, ())
+
+
+class scene_cached_property(functools.cached_property):
+    """:func:`functools.cached_property` computed once per scene whatever the threads.
+
+    Python 3.12 dropped ``cached_property``'s lock, so two tiles of a coverage map asking a
+    fresh scene for its ray caster at once would each build one. Here the first computes it
+    under the value's lock (:class:`_ValueLocks`) and the others wait for it; once kept, the
+    value is read from the instance's ``__dict__`` without a lock, as ``cached_property``'s is.
+    """
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            return self
+        cache = instance.__dict__
+        name = self.attrname
+        try:
+            return cache[name]
+        except KeyError:
+            pass
+        with instance._value_locks(name):
+            if name not in cache:
+                cache[name] = self.func(instance)
+            return cache[name]
 
 
 class WavepathsWarning(UserWarning):
@@ -109,6 +162,7 @@ class Scene:
     dropped_degenerate: int = 0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "_value_locks", _ValueLocks())
         # the arrays are read-only (the dihedra, the ray caster and the fingerprint are built
         # from them once and kept): held as read-only views, so the caller's arrays keep their flags
         for f in dataclass_fields(self):
@@ -127,7 +181,7 @@ class Scene:
     def num_polygons(self) -> int:
         return len(self.polygon_normal)
 
-    @functools.cached_property
+    @scene_cached_property
     def geometry_fingerprint(self) -> str:
         """A digest of the scene's geometry: the welded triangles, their objects and which
         share a material, and the tolerances (not the materials' parameters). Paths carry it
@@ -142,7 +196,7 @@ class Scene:
         h.update(repr((self.object_names, len(self.materials), self.tolerances)).encode())
         return h.hexdigest()
 
-    @functools.cached_property
+    @scene_cached_property
     def fingerprint(self) -> str:
         """A digest of everything the path search reads from the scene: its
         :attr:`geometry_fingerprint` and the materials (absorbers reflect no path). A
@@ -152,72 +206,111 @@ class Scene:
 
         return hashlib.blake2b((self.geometry_fingerprint + repr(self.materials)).encode(), digest_size=16).hexdigest()
 
-    @functools.cached_property
+    @scene_cached_property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64: minimum and maximum corner [m]."""
         used = self.vertices[np.unique(self.triangles)]
         return np.stack([used.min(axis=0), used.max(axis=0)])
 
-    @functools.cached_property
+    @scene_cached_property
     def center(self) -> np.ndarray:
         """(3,) float64: centre of the bounding box [m]; the origin of the float32 ray caster."""
         return self.bounds.mean(axis=0)
 
-    @functools.cached_property
+    @scene_cached_property
     def diagonal(self) -> float:
         """The scene's size [m], the scale of every tolerance: :func:`scene_size` of its vertices
         (the bounding box's diagonal for a box-shaped scene; unlike that diagonal, unchanged when
         the scene is rotated)."""
         return max(scene_size(self.vertices[np.unique(self.triangles)]), 1e-9)
 
-    @functools.cached_property
+    @scene_cached_property
     def triangle_dual(self) -> np.ndarray:
         """(f, 2, 3) float64: barycentric maps of the triangles (point-in-polygon tests)."""
         from .polygon_query import triangle_dual_basis
 
         return triangle_dual_basis(self.vertices, self.triangles)
 
+    def memo(self, key: Hashable, make: Callable[[], T], keep: int | None = None) -> T:
+        """``make()``, a value derived from this scene alone, computed once and kept on it.
+
+        Later stages keep here what they derive from the scene and reuse across calls (the
+        shells of its solids, the launched beams' polygon adjacency, a grid's inside mask).
+        Thread-safe: threads asking for one key while it is computed wait for that one
+        computation (:class:`_ValueLocks`).
+
+        Parameters
+        ----------
+        key : hashable
+            Names the value: a string, or a tuple whose first item names its kind.
+        make : callable
+            Computes the value, from the scene only (not from a transmitter or options).
+        keep : int, optional
+            With a tuple ``key``: at most this many values of its kind are kept, the oldest
+            dropped first (masks of several grids, say).
+
+        Returns
+        -------
+        The value kept for ``key``.
+        """
+        store = self.__dict__.setdefault("_memo", {})
+        try:
+            return store[key]
+        except KeyError:
+            pass
+        with self._value_locks(("memo", key)):
+            if key in store:
+                return store[key]
+            value = make()
+            if keep is not None:
+                kind = key[0]
+                same = [k for k in list(store) if isinstance(k, tuple) and k and k[0] == kind]
+                for k in same[: max(len(same) - keep + 1, 0)]:
+                    store.pop(k, None)
+            store[key] = value
+            return value
+
     def length_tolerance(self, relative: float) -> float:
         """A relative tolerance of :class:`SceneTolerances` in metres."""
         return relative * self.diagonal
 
     # ---- later stages, built on first use and cached ---------------------------------
-    @functools.cached_property
+    @scene_cached_property
     def dihedra(self) -> "Dihedra":
         """The scene's dihedra (seed §3.2), built on first use."""
         from ..topology.dihedra import build_dihedra
 
         return build_dihedra(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def polygon_spheres(self) -> tuple[np.ndarray, np.ndarray]:
         """Bounding spheres of the polygons: centres (p, 3) and radii (p,) [m] (beam tests)."""
         from ..search.images import polygon_spheres
 
         return polygon_spheres(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def polygon_hulls(self) -> "PolygonHulls":
         """Convex hulls of the polygons, and which can serve as occluders (hidden mirrors)."""
         from ..search.mirror_visibility import polygon_hulls
 
         return polygon_hulls(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def raycaster(self) -> "RayCaster":
         """Batched segment-occlusion queries (Embree, float32 on recentred coordinates)."""
         from ..raycast import default_raycaster
 
         return default_raycaster(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def polygon_sides(self) -> np.ndarray:
         """(p, 2) bool: a polygon reflects on its normal's side / on the other side (closed objects, coincident faces)."""
         from .closed import polygon_sides
 
         return polygon_sides(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def solid_object_mask(self) -> np.ndarray:
         """(objects,) bool, read-only in this process: the closed objects that enclose a volume
         (not a double-sided sheet). :func:`wavepaths.scene.solids.solid_objects` is their
@@ -228,28 +321,28 @@ class Scene:
         mask.setflags(write=False)
         return mask
 
-    @functools.cached_property
+    @scene_cached_property
     def outward_sign(self) -> np.ndarray:
         """(p,) float64: +1/-1 if a polygon reflects only on its normal's side/the other side, 0 if on both."""
         from .closed import outward_polygon_sign
 
         return outward_polygon_sign(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def hidden_polygons(self) -> np.ndarray:
         """(p,) bool: polygons reflecting on neither side (contact faces, duplicated coincident faces)."""
         from .closed import hidden_polygons
 
         return hidden_polygons(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def object_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """(objects, 3) float64 twice: each object's bounding box (``+inf`` / ``-inf`` without triangles)."""
         from .closed import object_boxes
 
         return object_boxes(self)
 
-    @functools.cached_property
+    @scene_cached_property
     def exact_raycaster(self) -> "RayCaster":
         """Float64 occlusion (numpy), for the few segments that graze an edge."""
         from ..raycast.numpy_caster import NumpyRayCaster

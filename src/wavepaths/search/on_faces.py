@@ -155,33 +155,36 @@ def _shells(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """``(shell, outward)``: per triangle, its shell (the edge-connected part of its object: a
     penthouse modelled as its own closed box in the building's mesh is one) and its outward
     unit normal if its object is a solid (the winding's normal, turned by the sign of the
-    object's volume; closed objects are consistently wound), else zeros. Cached on the scene."""
-    cache = scene.__dict__.setdefault("_coverage_cache", {})
-    if "shells" not in cache:
-        from ..scene.closed import _signed_volume, solid_objects_mask
-        from ..scene.mesh_topology import _UnionFind
+    object's volume; closed objects are consistently wound), else zeros. Kept on the scene
+    (:meth:`~wavepaths.scene.model.Scene.memo`)."""
+    return scene.memo("shells", lambda: _compute_shells(scene))
 
-        tris = scene.triangles
-        inc = scene.incidence
-        uf = _UnionFind(len(tris))
-        # triangles of one object on one edge are joined (on the edge two touching blocks
-        # share, four triangles meet: two of each)
-        for k in np.unique(inc.counts[inc.counts >= 2]).tolist():
-            block = inc.incidence_tri[inc.incidence_ptr[:-1][inc.counts == k][:, None] + np.arange(k)[None, :]]
-            for x in range(k):
-                for y in range(x + 1, k):
-                    a, b = block[:, x], block[:, y]
-                    same = scene.triangle_object[a] == scene.triangle_object[b]
-                    uf.union_pairs(a[same], b[same])
-        shell = uf.find_all().astype(np.int64)
-        v = scene.vertices[tris]
-        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        solid = solid_objects_mask(scene)
-        sign = np.array([np.sign(_signed_volume(scene, o)) if solid[o] else 0.0 for o in range(len(solid))])
-        outward = n * sign[scene.triangle_object][:, None]
-        cache["shells"] = (shell, outward)
-    return cache["shells"]
+
+def _compute_shells(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_shells`, computed."""
+    from ..scene.closed import _signed_volume, solid_objects_mask
+    from ..scene.mesh_topology import _UnionFind
+
+    tris = scene.triangles
+    inc = scene.incidence
+    uf = _UnionFind(len(tris))
+    # triangles of one object on one edge are joined (on the edge two touching blocks
+    # share, four triangles meet: two of each)
+    for k in np.unique(inc.counts[inc.counts >= 2]).tolist():
+        block = inc.incidence_tri[inc.incidence_ptr[:-1][inc.counts == k][:, None] + np.arange(k)[None, :]]
+        for x in range(k):
+            for y in range(x + 1, k):
+                a, b = block[:, x], block[:, y]
+                same = scene.triangle_object[a] == scene.triangle_object[b]
+                uf.union_pairs(a[same], b[same])
+    shell = uf.find_all().astype(np.int64)
+    v = scene.vertices[tris]
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    solid = solid_objects_mask(scene)
+    sign = np.array([np.sign(_signed_volume(scene, o)) if solid[o] else 0.0 for o in range(len(solid))])
+    outward = n * sign[scene.triangle_object][:, None]
+    return shell, outward
 
 
 def _triangle_sides(v: np.ndarray, n: np.ndarray, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -77,30 +77,32 @@ def _adjacency(scene: "Scene") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """CSR over polygons: for each polygon, its (dihedron, other polygon) pairs across its
     convex edges (the diffracting dihedra: where one face can shadow the other, so a beam can
     pass beside the corner as a sliver; at a concave corner both faces look into the same
-    space and the rays on either side follow both). Cached on the scene."""
-    got = scene.__dict__.get("_launch_adjacency")
-    if got is None:
-        D = scene.dihedra
-        owner = np.repeat(np.arange(len(D.face_ptr) - 1), np.diff(D.face_ptr))
-        # every ordered pair of distinct faces of one dihedron
-        fa, fb = [], []
-        for j in range(int(np.diff(D.face_ptr).max(initial=0))):
-            for i in range(int(np.diff(D.face_ptr).max(initial=0))):
-                if i == j:
-                    continue
-                ok = np.nonzero(np.diff(D.face_ptr) > max(i, j))[0]
-                fa.append(D.face_ptr[ok] + i)
-                fb.append(D.face_ptr[ok] + j)
-        fa = np.concatenate(fa) if fa else np.zeros(0, np.int64)
-        fb = np.concatenate(fb) if fb else np.zeros(0, np.int64)
-        pa, pb, dd = D.face_polygon[fa], D.face_polygon[fb], owner[fa]
-        keep = (pa != pb) & D.diffracting[dd]
-        pa, pb, dd = pa[keep], pb[keep], dd[keep]
-        o = np.argsort(pa, kind="stable")
-        ptr = np.searchsorted(pa[o], np.arange(scene.num_polygons + 1))
-        got = (ptr, dd[o], pb[o])
-        scene.__dict__["_launch_adjacency"] = got
-    return got
+    space and the rays on either side follow both). Kept on the scene
+    (:meth:`~wavepaths.scene.model.Scene.memo`)."""
+    return scene.memo("launch_adjacency", lambda: _compute_adjacency(scene))
+
+
+def _compute_adjacency(scene: "Scene") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_adjacency`, computed."""
+    D = scene.dihedra
+    owner = np.repeat(np.arange(len(D.face_ptr) - 1), np.diff(D.face_ptr))
+    # every ordered pair of distinct faces of one dihedron
+    fa, fb = [], []
+    for j in range(int(np.diff(D.face_ptr).max(initial=0))):
+        for i in range(int(np.diff(D.face_ptr).max(initial=0))):
+            if i == j:
+                continue
+            ok = np.nonzero(np.diff(D.face_ptr) > max(i, j))[0]
+            fa.append(D.face_ptr[ok] + i)
+            fb.append(D.face_ptr[ok] + j)
+    fa = np.concatenate(fa) if fa else np.zeros(0, np.int64)
+    fb = np.concatenate(fb) if fb else np.zeros(0, np.int64)
+    pa, pb, dd = D.face_polygon[fa], D.face_polygon[fb], owner[fa]
+    keep = (pa != pb) & D.diffracting[dd]
+    pa, pb, dd = pa[keep], pb[keep], dd[keep]
+    o = np.argsort(pa, kind="stable")
+    ptr = np.searchsorted(pa[o], np.arange(scene.num_polygons + 1))
+    return ptr, dd[o], pb[o]
 
 
 def neighbour_branches(scene: "Scene", poly: np.ndarray, x: np.ndarray, u: np.ndarray, radius: np.ndarray,
