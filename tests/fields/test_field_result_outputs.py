@@ -270,3 +270,23 @@ def test_the_impulse_response_of_a_pair_that_does_not_exist_is_an_error():
         with pytest.raises(WavepathsError, match=f"`{name}` must be an index in 0..0"):
             res.cir(**kwargs)
 
+
+
+def test_power_db_is_the_one_db_conversion_zero_is_minus_inf_and_nan_is_kept():
+    """``power_db``: 10 log10 of powers, -inf for no power, NaN kept for a cell not traced (the
+    map, the validation report and the benchmarks all convert with it); no warning."""
+    import warnings
+
+    import numpy as np
+
+    from wavepaths.fields.result import power_db
+
+    x = np.array([[1e-3, 0.0], [np.nan, 2.5]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = power_db(x)
+    assert got[0, 0] == pytest.approx(-30.0, abs=1e-12)
+    assert got[0, 1] == -np.inf
+    assert np.isnan(got[1, 0])
+    assert got[1, 1] == pytest.approx(10 * np.log10(2.5), abs=1e-12)
+    assert power_db(4.0).shape == ()

@@ -51,6 +51,7 @@ import time
 
 import numpy as np
 
+from ..fields.result import power_db
 from .scenes import STREET_CANYON_TX, street_canyon_receivers
 
 FREQUENCY_HZ = 3.5e9
@@ -151,10 +152,6 @@ def wavepaths_map(scene, grid_spec: dict, setting: tuple, sub: int = 1, workers:
         return _block_mean(power, sub), elapsed
 
 
-def _db(x: np.ndarray) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return 10.0 * np.log10(x)
-
 
 def run_map_tradeoff(quick: bool = False, workers: int = 1, progress=print) -> dict:
     """The coverage-map half of benchmark 3, on ``simple_street_canyon``."""
@@ -171,7 +168,7 @@ def run_map_tradeoff(quick: bool = False, workers: int = 1, progress=print) -> d
     progress(f"benchmark 3 (maps): wavepaths reference, {ref_sub}x{ref_sub} sub-cells of {cell:g} m cells")
     centre_map, _ = wavepaths_map(scene, spec, settings[0], 1, workers)  # warm-up
     ref_lin, ref_time = wavepaths_map(scene, spec, WAVEPATHS_SETTINGS[-1], ref_sub, workers)
-    ref_db = _db(ref_lin)
+    ref_db = power_db(ref_lin)
     # compare the cells whose centre lies outdoors (NaN: inside a building), the cells a
     # map of cell-centre receivers defines; a cell cut by a wall is averaged over its
     # outdoor sub-cells in the reference
@@ -180,7 +177,7 @@ def run_map_tradeoff(quick: bool = False, workers: int = 1, progress=print) -> d
     for setting in settings:
         for sub in ((1,) if setting != WAVEPATHS_SETTINGS[-1] else ((1, 2) if not quick else (1,))):
             lin, el = wavepaths_map(scene, spec, setting, sub, workers)
-            err = map_error(_db(lin), ref_db, valid)
+            err = map_error(power_db(lin), ref_db, valid)
             wp_points.append({"label": f"{setting[0]}" + (f" {sub}x{sub}" if sub > 1 else ""), "time_s": el,
                               "error": err})
             progress(f"  wavepaths {wp_points[-1]['label']}: {el:.2f} s, {err['mean_abs_db']:.2f} dB")
@@ -280,14 +277,14 @@ def run_path_tradeoff(quick: bool = False, n_rx: int = 100, progress=print) -> d
 
     query(WAVEPATHS_SETTINGS[0])  # warm-up
     ref_p, ref_f, _ = query(WAVEPATHS_SETTINGS[-1])
-    ref_db = _db(_gain_per_rx(ref_p.rx_index, ref_f.a, n_rx))
+    ref_db = power_db(_gain_per_rx(ref_p.rx_index, ref_f.a, n_rx))
     wp_points = []
     for setting in path_query_settings():
         times = []
         for _ in range(1 if quick else 3):
             p, f, el = query(setting)
             times.append(el)
-        err = map_error(_db(_gain_per_rx(p.rx_index, f.a, n_rx)), ref_db, valid)
+        err = map_error(power_db(_gain_per_rx(p.rx_index, f.a, n_rx)), ref_db, valid)
         err["paths_found_fraction"] = len(p) / len(ref_p)
         wp_points.append({"label": setting[0], "time_s": float(np.median(times)), "num_paths": len(p), "error": err})
     out = {"scene": "simple_street_canyon", "num_rx": n_rx, "reference": {"engine": "wavepaths",
@@ -305,9 +302,9 @@ def run_path_tradeoff(quick: bool = False, n_rx: int = 100, progress=print) -> d
         sn = run_sionna_paths(xml, STREET_CANYON_TX, rx, frequency_hz=FREQUENCY_HZ, max_depth=3, diffraction=True,
                               edge_diffraction=True, samples_per_src=n, warmup=n < 10**7)
         runs.append((n, sn))
-    own = _db(_gain_per_rx(runs[-1][1].rx_index, runs[-1][1].a, n_rx))
+    own = power_db(_gain_per_rx(runs[-1][1].rx_index, runs[-1][1].a, n_rx))
     for n, sn in runs:
-        g = _db(_gain_per_rx(sn.rx_index, sn.a, n_rx))
+        g = power_db(_gain_per_rx(sn.rx_index, sn.a, n_rx))
         err = map_error(g, ref_db, valid)
         err["paths_found_fraction"] = sn.num_paths / len(ref_p)
         sn_points.append({"label": f"{n:.0e} samples", "samples_per_src": n, "time_s": sn.elapsed_s,

@@ -231,7 +231,7 @@ class CoverageMap:
     # ---- decibels ----------------------------------------------------------------------
     def path_gain_db(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
         """shape float64: path gain [dB]; ``-inf`` where no path arrives, NaN inside objects."""
-        return _db(self.path_gain(tx, coherent))
+        return power_db(self.path_gain(tx, coherent))
 
     def received_power_dbm(self, tx: int | None = None, coherent: bool | None = None) -> np.ndarray:
         """shape float64: received power [dBm] for ``tx_power_dbm``."""
@@ -278,7 +278,7 @@ class CoverageMap:
         """
         if self.field_total is not None:
             g = self._select(self.field_gain_per_tx(coherent), tx, coherent)
-            return field_strength_dbuv_m(self.tx_power_dbm + _db(g), self.frequency_hz)
+            return field_strength_dbuv_m(self.tx_power_dbm + power_db(g), self.frequency_hz)
         if not self.has_field_strength:
             raise WavepathsError(
                 f"this coverage map file holds no field sums (written by an older wavepaths), and its received "
@@ -287,7 +287,7 @@ class CoverageMap:
 
     def mechanism_gain_db(self, mechanism: Mechanism, tx: int | None = None) -> np.ndarray:
         """shape float64: :meth:`mechanism_gain` [dB]."""
-        return _db(self.mechanism_gain(mechanism, tx))
+        return power_db(self.mechanism_gain(mechanism, tx))
 
     def quantity(self, name: str, tx: int | None = None) -> np.ndarray:
         """One of ``path_gain_db``, ``received_power_dbm``, ``field_strength_dbuv_m``, or
@@ -334,8 +334,8 @@ class CoverageMap:
             "best_server": self.best_server,
             "cell_centers": self.cell_centers,
             "inside": self.inside,
-            "path_gain_db_per_tx": _db(self.path_gain_per_tx()),
-            "mechanism_gain_db": _db(self.power_sum),
+            "path_gain_db_per_tx": power_db(self.path_gain_per_tx()),
+            "mechanism_gain_db": power_db(self.power_sum),
             "tx_positions": self.tx_positions,
             "a_total": self.a_total,
             "a_sum": self.a_sum,
@@ -407,9 +407,3 @@ class CoverageMap:
         return plot_coverage(self, quantity=quantity, tx=tx, **kwargs)
 
 
-def _db(x: np.ndarray) -> np.ndarray:
-    """10 log10 with -inf for zeros and NaN kept."""
-    x = np.asarray(x, dtype=float)
-    out = power_db(np.where(np.isnan(x), 0.0, x))
-    out[np.isnan(x)] = np.nan
-    return out

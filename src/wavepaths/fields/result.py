@@ -19,11 +19,14 @@ ETA_0 = 376.730313668  # free-space impedance [ohm]
 
 
 def power_db(x: np.ndarray) -> np.ndarray:
-    """10 log10(x), with -inf for zeros and no warning."""
+    """10 log10(x) of powers ``x >= 0``, without a warning: -inf for zeros (no path), NaN kept
+    (a cell not traced: inside a building, say). The one dB conversion of the package's powers
+    (paths, maps, the validation report and the benchmarks)."""
     x = np.asarray(x, dtype=float)
     out = np.full(x.shape, -np.inf)
     pos = x > 0
     out[pos] = 10 * np.log10(x[pos])
+    out[np.isnan(x)] = np.nan
     return out
 
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..coverage import CoverageOptions, PlanarGrid, coverage
 from ..fields import FieldConfig
+from ..fields.result import power_db
 from ..scene import load_scene
 from ..search import TraceOptions
 
@@ -42,10 +43,6 @@ REFERENCE_FACTOR = 10  # Sionna's samples for the low-noise reference, times sam
 # measured std 0.56 dB (4 m cells) and 0.73 dB (2 m), median within 0.1 dB (thirtieth session)
 LIKE_FOR_LIKE_TOLERANCES = {"std_db": 1.5, "abs_median_db": 0.5}
 
-
-def _db(x: np.ndarray) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return 10 * np.log10(x)
 
 
 def _field_gain(cm) -> np.ndarray:
@@ -114,7 +111,7 @@ def compare_coverage(scene_xml: str, tx, center, size, cell: float, max_depth: i
         cm = coverage(scene, tx, grid, opts, fields=FieldConfig(frequency_hz),
                       settings=CoverageOptions(coherent=False, workers=1))
         wp_time = time.perf_counter() - t0
-        wp_db = _db(_field_gain(cm))
+        wp_db = power_db(_field_gain(cm))
         if wp_db.shape != sn.path_gain_db.shape:
             raise ValueError(f"grid shapes differ: wavepaths {wp_db.shape}, Sionna {sn.path_gain_db.shape}")
         centres_ok = np.allclose(cm.cell_centers[..., :2], sn.cell_centers[..., :2], atol=1e-3 * cell)
@@ -149,12 +146,12 @@ def _decomposition(scene, tx, grid, opts, frequency_hz, sionna, samples, wp_db, 
         m = coverage(scene, tx, fine, options, fields=field_config, settings=settings)
         if m.inside.shape != (SUBSAMPLES * len(compared), SUBSAMPLES * compared.shape[1]):
             raise ValueError(f"the sub-sampled grid {m.inside.shape} does not tile the cells {compared.shape}")
-        return _db(_cell_average(_field_gain(m), m.inside, SUBSAMPLES))
+        return power_db(_cell_average(_field_gain(m), m.inside, SUBSAMPLES))
 
     n_ref = f"{REFERENCE_FACTOR * samples:,} samples"
     centre, cell_avg = "at the cell centres, textbook UTD", f"averaged over {SUBSAMPLES} x {SUBSAMPLES} points per cell"
-    second = _db(sionna(samples, seed=2).path_gain)
-    reference = _db(sionna(REFERENCE_FACTOR * samples).path_gain)
+    second = power_db(sionna(samples, seed=2).path_gain)
+    reference = power_db(sionna(REFERENCE_FACTOR * samples).path_gain)
     t0 = time.perf_counter()
     textbook = averaged(opts, FieldConfig(frequency_hz))
     compat = FieldConfig(frequency_hz, "utd", "sionna")
