@@ -28,6 +28,24 @@ def test_cli_writes_png_and_npz(tmp_path):
         np.testing.assert_array_equal(np.isnan(gain), inside)
         np.testing.assert_allclose(centres[..., 2], 5.0)
     assert "cells/s" in r.stdout
+    assert "replacing" not in r.stdout
+
+
+def test_a_second_map_in_the_same_folder_says_which_files_it_replaced(tmp_path):
+    """The default --out is the current folder: a second run there replaces the first run's
+    map, and says so (in the text and in --json's ``replaced``); a first run replaces nothing."""
+    import json
+
+    args = ("box_on_ground", "--tx", -14.2, -8.1, 7, "--height", 5, "--cell", 4, "--size", 30, 20, "--max-reflections", 0,
+            "--out", tmp_path, "--workers", 1, "--quiet", "--json")
+    first = json.loads(run(*args).stdout)
+    assert first["replaced"] == []
+    second = run(*args)
+    assert second.returncode == 0, second.stderr
+    got = json.loads(second.stdout)
+    assert sorted(map(os.path.basename, got["replaced"])) == ["coverage.npz", "coverage.png"]
+    text = run(*args[:-1])
+    assert "replacing the earlier coverage.npz and coverage.png" in text.stdout
 
 
 def test_cli_bad_input_exits_2_without_traceback(tmp_path):

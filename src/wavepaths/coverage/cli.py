@@ -163,6 +163,9 @@ def run(args) -> int:
         if client is not None:
             client.close()
     os.makedirs(args.out, exist_ok=True)
+    # an earlier run's map in the same folder is replaced: said, not silent
+    replaced = [p for p in (os.path.join(args.out, name) for name in ("coverage.npz", "coverage.png"))
+                if os.path.exists(p)]
     npz = cmap.save(os.path.join(args.out, "coverage.npz"))
     png = save_png(cmap, os.path.join(args.out, "coverage.png"), args.quantity, scene=scene,
                    title=f"{os.path.basename(str(scene.source))}: {args.quantity}")
@@ -183,6 +186,7 @@ def run(args) -> int:
         "max": float(finite.max()) if finite.size else None,
         "png": png,
         "npz": npz,
+        "replaced": replaced,  # the files of an earlier run that these replaced
         # the settings behind the numbers, as the .npz's metadata and ``paths --json`` name them
         "tx_power_dbm": cmap.metadata["field_config"]["tx_power_dbm"],
         "trace_options": cmap.metadata["trace_options"],
@@ -205,5 +209,6 @@ def run(args) -> int:
     print(f"{cmap.elapsed_s:.2f} s ({cmap.cells_per_second:.0f} cells/s, {summary['ran_on']})")
     if finite.size:
         print(f"{args.quantity}: {summary['min']:.1f} .. {summary['max']:.1f}")
-    print(f"wrote {png} and {npz}")
+    print(f"wrote {png} and {npz}" + (f" (replacing the earlier {' and '.join(map(os.path.basename, replaced))})"
+                                        if replaced else ""))
     return 0
