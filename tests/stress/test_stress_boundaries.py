@@ -272,3 +272,43 @@ def test_a_grazing_source_puts_both_near_boundaries_on_their_sides():
         np.add.at(t, p.rx_index, f.a * np.exp(-2j * np.pi * 3e9 * p.delays))
         mag = np.abs(t)
         assert mag.max() > 0 and np.abs(np.diff(mag)).max() <= 0.05 * mag.max(), (pol, mag)
+
+
+def test_a_line_of_sight_blocked_by_another_object_leaves_the_diffraction_at_its_angle():
+    """Half-plane screen (edge on the x axis), receiver 1 m from the edge and 0.05 rad on the
+    lit side of its shadow boundary; a plate that blocks the line of sight but not the
+    diffracted leg. The diffracted path is the same with and without the plate, and so must
+    its coefficient be (to rounding): the line of sight is missing because of another object,
+    not because the receiver is on the edge's shadow side. A review found it moved onto the
+    boundary, 243 % off with its sign flipped, once a distant object made the scene 20 km wide
+    (the old margin was 4 ray_offset of the size: 0.08 rad here)."""
+    from wavepaths.em.antennas import Antenna
+    from wavepaths.fields import FieldConfig, compute_fields
+
+    screen = [[-50, 0, -50], [50, 0, -50], [50, 0, 0], [-50, 0, 0]]
+    far = [[2e4, 10, 0], [2e4 + 1, 10, 0], [2e4 + 1, 11, 0], [2e4, 11, 0]]  # only widens the scene
+    tx = np.array([0.0, -3.0, 4.0])
+    rx = rotate_yz(-tx / np.linalg.norm(tx), 0.05)  # 1 m from the edge
+    # the plate: across the line of sight 0.6 m before the receiver, its edge midway between the
+    # line of sight and the diffracted leg (25 mm apart there)
+    d = (rx - tx) / np.linalg.norm(rx - tx)
+    c = rx - 0.6 * d
+    q = rx + (((c - rx) @ d) / (-rx @ d)) * -rx
+    g = (q - c) / np.linalg.norm(q - c)
+    e0 = c + 0.5 * np.linalg.norm(q - c) * g
+    x = np.array([1.0, 0.0, 0.0])
+    plate = [e0 - 0.5 * x, e0 + 0.5 * x, e0 + 0.5 * x - g, e0 - 0.5 * x - g]
+    cfg = FieldConfig(3e9, tx_antenna=Antenna("iso", "V"), rx_antenna=Antenna("iso", "V"))
+    got = {}
+    for name, quads in (("open", [screen, far]), ("blocked", [screen, far, plate]), ("small", [screen])):
+        scene = quads_scene([np.asarray(q_, float).tolist() for q_ in quads])
+        p = trace(scene, tx[None], rx[None], OPTS)
+        f = compute_fields(scene, p, cfg)
+        top = [i for i in range(len(p)) if p.depth[i] == 1 and p.interactions[i, 0] == 2
+               and abs(p.vertices[i, 1, 1]) + abs(p.vertices[i, 1, 2]) < 1e-12]
+        assert len(top) == 1, name
+        got[name] = (f.a[top[0]], p.vertices[top[0], :3], int((p.depth == 0).sum()))
+    assert got["open"][2] == 1 and got["blocked"][2] == 0  # the plate does block the line of sight
+    np.testing.assert_allclose(got["blocked"][1], got["open"][1], atol=1e-12)
+    for name in ("blocked", "small"):
+        assert abs(got[name][0] - got["open"][0]) <= 1e-12 * abs(got["open"][0]), (name, got[name][0], got["open"][0])

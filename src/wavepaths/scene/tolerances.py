@@ -69,7 +69,8 @@ class SceneTolerances:
         scene half-size; 1e-6 is 30 times that. Casts are no longer shortened (every hit is
         decided in float64, :mod:`wavepaths.raycast`); the value sets how close to an edge
         a geometrical-optics ray counts as grazing: within ``4 ray_offset`` its (tx, rx)
-        pair is re-cast in float64 and the UTD boundary side follows the search's decision.
+        pair is re-cast in float64. (The UTD boundary side follows the search's decision
+        within the much smaller :func:`wavepaths.fields.chain.boundary_margin`.)
     """
 
     weld: float = 1e-6
