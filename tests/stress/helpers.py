@@ -148,6 +148,7 @@ def reported(fn, allow_on_face: bool = False):
 
 
 ON_FACE_MESSAGE = r".*lie exactly on a face"
+NEAR_EDGE_MESSAGE = r".*lie within \S+ m of an edge, off its faces"
 
 
 # ---- independent references -------------------------------------------------------------

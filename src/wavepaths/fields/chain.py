@@ -48,7 +48,7 @@ from ..em.utd import (
     luebbers_face_coefficients,
     wedge_reflection_matrices,
 )
-from ..scene.polygon_query import POLYGON_MARGIN
+from ..scene.polygon_query import polygon_margin_length
 from ..search.paths import InteractionType, Paths
 from . import compiled as _compiled
 from .config import FieldConfig
@@ -184,7 +184,8 @@ BOUNDARY_NUDGE = 1e-9  # [rad] the side it is moved to, matching the geometrical
 
 def boundary_margin(scene: "Scene") -> float:
     """[m] How close to an edge a geometrical-optics (GO) ray may pass with the search's
-    decision on it still open to its tolerances: ``4 POLYGON_MARGIN`` of the scene's size.
+    decision on it still open to its tolerances: ``4 POLYGON_MARGIN`` of the scene's size
+    (:func:`~wavepaths.scene.polygon_query.polygon_margin_length`).
 
     The search decides each GO path in float64: occlusion exactly (to ``1e-12`` of the size,
     the float64 tree or Embree's float32 hits confirmed in float64, the pairs grazing an edge
@@ -198,7 +199,7 @@ def boundary_margin(scene: "Scene") -> float:
     object blocking the line of sight 0.05 rad inside that margin moved the diffraction onto
     the boundary and flipped its sign.)
     """
-    return 4 * POLYGON_MARGIN * scene.diagonal
+    return polygon_margin_length(scene)
 
 
 def _path_keys(paths: Paths, pairs: np.ndarray) -> set:

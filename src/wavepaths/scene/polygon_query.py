@@ -49,6 +49,17 @@ POLYGON_MARGIN = 1e-9
 point on a polygon's border, up to the rounding of its coordinates, is inside."""
 
 
+def polygon_margin_length(scene: "Scene") -> float:
+    """[m] ``4 POLYGON_MARGIN`` of the scene's size: beyond this distance from a polygon's
+    border no point is taken for inside it by :func:`points_in_polygons` (a barycentric
+    margin is at most that fraction of the triangle's size, which is at most the scene's).
+    Closer to an edge, a reflection point just beyond the edge may be accepted: the UTD
+    boundary side follows the search within it (:func:`wavepaths.fields.chain.boundary_margin`),
+    and an end point this close to an edge is reported
+    (:func:`wavepaths.search.on_faces.points_near_edges`)."""
+    return 4 * POLYGON_MARGIN * scene.diagonal
+
+
 def points_in_polygons(scene: "Scene", points: np.ndarray, polygons: np.ndarray, eps: float = POLYGON_MARGIN,
                        compiled: bool | None = None) -> np.ndarray:
     """Whether ``points[i]`` lies inside polygon ``polygons[i]`` (closed).

@@ -31,7 +31,7 @@ from ..scene.model import Scene
 from . import kernels
 from .context import TxContext, build_tx_context
 from .launched import prepare_launched
-from .on_faces import legs_into_solids, points_on_faces, points_on_surfaces, solid_surface_cones
+from .on_faces import legs_into_solids, points_near_edges, points_on_faces, points_on_surfaces, solid_surface_cones
 from .through_vertices import drop_crossed
 from .options import TraceOptions, check_trace_arguments
 from .paths import Paths, assemble
@@ -105,10 +105,12 @@ def _warn_inside(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarr
 def _warn_on_faces(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarray | None = None,
                    rx_face: np.ndarray | None = None) -> None:
     """Report transmitters and receivers lying exactly on a face (see :func:`points_on_faces`,
-    whose results ``tx_face``, ``rx_face`` may be passed in)."""
+    whose results ``tx_face``, ``rx_face`` may be passed in), and those off the faces but
+    within the point-in-polygon margin of an edge (:func:`points_near_edges`)."""
     import warnings
 
     from ..scene.model import WavepathsWarning
+    from ..scene.polygon_query import polygon_margin_length
 
     for name, pts, face in (("transmitter", tx, tx_face), ("receiver", rx, rx_face)):
         if face is None:
@@ -120,6 +122,19 @@ def _warn_on_faces(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.nda
                 f"{len(rows)} {name}(s) lie exactly on a face (first: row {rows[0]}, object {obj}): they take "
                 "part in no reflection or diffraction there, and the field there is the limit from neither "
                 "side of the face; move them off it (any distance above the plane tolerance is exact)",
+                WavepathsWarning,
+                stacklevel=3,
+            )
+        edge, dist = points_near_edges(scene, pts)
+        rows = np.nonzero((edge >= 0) & (face < 0))[0]
+        if len(rows):
+            r = rows[0]
+            obj = scene.object_names[scene.triangle_object[scene.dihedra.face_triangle[scene.dihedra.face_ptr[edge[r]]]]]
+            warnings.warn(
+                f"{len(rows)} {name}(s) lie within {polygon_margin_length(scene):.2g} m of an edge, off its faces "
+                f"(first: row {r}, {dist[r]:.2g} m from an edge of object {obj}): there the search's point-in-polygon "
+                "margin may accept a reflection on the edge's faces just beyond the edge, and the fields may be off "
+                f"by several dB; move them at least {polygon_margin_length(scene):.2g} m from the edge, or onto it",
                 WavepathsWarning,
                 stacklevel=3,
             )
