@@ -314,7 +314,8 @@ def test_a_line_of_sight_blocked_by_another_object_leaves_the_diffraction_at_its
         assert abs(got[name][0] - got["open"][0]) <= 1e-12 * abs(got["open"][0]), (name, got[name][0], got["open"][0])
 
 
-@pytest.mark.parametrize("phi_p", [1e-2, 1e-3, 1e-4])
+@pytest.mark.parametrize("phi_p", [1e-2, 1e-3, 1e-4, np.pi - 1e-6, np.pi, np.pi + 1e-6],
+                         ids=["1e-2", "1e-3", "1e-4", "coplanar-1e-6", "coplanar", "coplanar+1e-6"])
 @pytest.mark.parametrize("pol", ["soft", "hard"])
 def test_a_source_grazing_the_face_matches_sommerfeld(phi_p, pol):
     """A source grazing the screen's face (phi' -> 0, the shadow and reflection boundaries
@@ -324,7 +325,11 @@ def test_a_source_grazing_the_face_matches_sommerfeld(phi_p, pol):
     3e-3 of the unit incident field, as for the boundaries above: UTD's asymptotic error at
     k rho = 50 (measured 2e-3 at most, hard, broadside); the soft total vanishes with phi'
     (incident and reflected waves cancel on the face), the hard one tends to twice the
-    incident field's, which a 1 % error in the grazing reflection would miss."""
+    incident field's, which a 1 % error in the grazing reflection would miss. And a source
+    coplanar with the screen beyond its edge (phi' = pi, and 1e-6 rad either side: the
+    incident wave grazes both faces), where the hard total is the incident field everywhere
+    and the soft one is not (the review found coplanar sources checked only against the
+    engine's own output)."""
     W, H = 1e4, 4e4
     s = quads_scene([[[-W, 0, -H], [W, 0, -H], [W, 0, 0], [-W, 0, 0]]])
     freq = 3e9
