@@ -58,3 +58,21 @@ def test_a_transmitter_beyond_the_margin_is_not_reported():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         trace(scene, tx, RX, TraceOptions(max_reflections=1, diffraction_reflections=0))
+
+
+def test_coverage_reports_cell_centres_nanometres_from_an_edge():
+    """A grid 0.1 um above the half-plane's edge (the x axis) with a row of centres in the
+    screen's plane: those 4 are reported; 1 mm above, none."""
+    from wavepaths.coverage import CoverageOptions, PlanarGrid, coverage
+
+    scene = load_scene("half_plane")
+    opts = TraceOptions(max_reflections=1, diffraction_reflections=0)
+    settings = CoverageOptions(workers=1)
+    tx = [[0.0, -3.0, 4.0]]
+    grid = PlanarGrid(center=[0.25, 0.0], height=1e-7, size=[4.0, 3.0], cell_size=1.0)
+    with pytest.warns(UserWarning, match=r"4 traced cell centres lie within \S+ m of an edge"):
+        coverage(scene, tx, grid, opts, settings=settings)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        coverage(scene, tx, PlanarGrid(center=[0.25, 0.0], height=1e-3, size=[4.0, 3.0], cell_size=1.0), opts,
+                 settings=settings, progress=False)

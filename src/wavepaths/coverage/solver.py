@@ -42,11 +42,12 @@ from ..search.diffraction import finish_diffraction
 from ..search.launched import prepare_launched, shipped_context
 from ..search.tile import trace_tile
 from ..search.through_vertices import drop_crossed
+from ..search.on_faces import points_near_edges
 from ..search.trace import _warn_on_faces, check_positions, points_on_faces
 from .grid import Grid, MeshGrid, PlanarGrid
 from ..scene.solids import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap
-from .surfaces import cells_on_faces, outside_solids, warn_cells_on_faces
+from .surfaces import cells_on_faces, outside_solids, warn_cells_near_edges, warn_cells_on_faces
 from .tolerance import tolerance_keep
 
 # result bytes per cell and transmitter: a_total (16) + a_sum (3 x 16) + power_sum (3 x 8)
@@ -456,6 +457,8 @@ def coverage(
     active = np.nonzero(~inside)[0]
     _warn_on_faces(scene, tx, np.empty((0, 3)))  # as trace() does: such a transmitter is on no side of its face
     warn_cells_on_faces(scene, flat, active, faces[active], int((on_solid & inside).sum()))
+    near_edge = _cached(scene, "nearedge:" + grid_key, lambda: points_near_edges(scene, flat)[0])
+    warn_cells_near_edges(scene, flat, active[(near_edge[active] >= 0) & (faces[active] < 0)])
     _check_off_transmitters(scene, tx, flat, active, grid)
 
     t = time.perf_counter()

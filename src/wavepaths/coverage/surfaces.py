@@ -77,6 +77,24 @@ def warn_cells_on_faces(scene: Scene, flat: np.ndarray, active: np.ndarray, face
         )
 
 
+def warn_cells_near_edges(scene: Scene, flat: np.ndarray, near: np.ndarray) -> None:
+    """Warn when traced cell centres ``flat[near]`` lie off the faces but within the search's
+    point-in-polygon margin of an edge (:func:`wavepaths.search.on_faces.points_near_edges`),
+    as :func:`wavepaths.search.trace.trace` warns of such end points."""
+    if len(near):
+        from ..scene.polygon_query import polygon_margin_length
+
+        m = polygon_margin_length(scene)
+        warnings.warn(
+            f"{len(near)} traced cell centres lie within {m:.2g} m of an edge, off its faces (first: cell "
+            f"{int(near[0])} at {flat[near[0]].tolist()}): there the search's point-in-polygon margin may accept a "
+            "reflection on the edge's faces just beyond the edge, and the fields may be off by several dB; offset "
+            "the grid by a fraction of a cell or change its height (PlanarGrid's `center` and `height`, --center "
+            "and --height)",
+            WavepathsWarning, stacklevel=3,
+        )
+
+
 def outside_solids(scene: Scene, ctx: TxContext, paths: Paths, stats: Counter) -> Paths:
     """``paths`` without those whose first leg enters a solid from a transmitter lying on its
     surface (:func:`wavepaths.search.on_faces.legs_into_solids`; the cells on a solid's
