@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from collections.abc import Mapping
 
     from ..raycast import RayCaster
-    from ..search.mirror_visibility import PolygonHulls
+    from .polygon_shapes import PolygonHulls
     from ..topology.dihedra import Dihedra
 
 
@@ -285,14 +285,14 @@ class Scene:
     @scene_cached_property
     def polygon_spheres(self) -> tuple[np.ndarray, np.ndarray]:
         """Bounding spheres of the polygons: centres (p, 3) and radii (p,) [m] (beam tests)."""
-        from ..search.images import polygon_spheres
+        from .polygon_shapes import polygon_spheres
 
         return polygon_spheres(self)
 
     @scene_cached_property
     def polygon_hulls(self) -> "PolygonHulls":
         """Convex hulls of the polygons, and which can serve as occluders (hidden mirrors)."""
-        from ..search.mirror_visibility import polygon_hulls
+        from .polygon_shapes import polygon_hulls
 
         return polygon_hulls(self)
 

@@ -80,7 +80,7 @@ class Apertures:
     Attributes
     ----------
     centre : (p, 3) float64, radius : (p,) float64
-        Bounding spheres (:func:`~wavepaths.search.images.polygon_spheres`) [m].
+        Bounding spheres (:func:`~wavepaths.scene.polygon_shapes.polygon_spheres`) [m].
     quads : (p, 4, 3) float64
         Bounding rectangles in their planes (:func:`polygon_quads`) [m].
     """
@@ -147,7 +147,7 @@ def chain_apertures(
     level : ImageLevel
     rows : (m,) int64
     centre, radius : (p, 3), (p,) float64, optional
-        Polygon bounding spheres (:func:`~wavepaths.search.images.polygon_spheres`).
+        Polygon bounding spheres (:func:`~wavepaths.scene.polygon_shapes.polygon_spheres`).
     quads : (p, 4, 3) float64, optional
         Polygon rectangles (:func:`polygon_quads`).
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import ImageTreeTooLarge, WavepathsError
 from ..scene.closed import points_inside_closed
+from ..scene.polygon_shapes import polygon_spheres  # re-exported: the spheres moved to the scene
 from .on_faces import points_on_surfaces
 from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree, vector_angle
 from .geometry import mirror_points, segment_plane_intersection
@@ -72,21 +73,6 @@ class ImageLevel:
     def last(self) -> np.ndarray:
         """(c, 3): the deepest image of each chain (the source itself at order 0)."""
         return self.images[:, -1]
-
-
-def polygon_spheres(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
-    """Bounding spheres of the polygons: centres (p, 3) and radii (p,) [m]."""
-    corners = scene.vertices[scene.triangles]
-    p = scene.num_polygons
-    lo = np.full((p, 3), np.inf)
-    hi = np.full((p, 3), -np.inf)
-    np.minimum.at(lo, scene.triangle_polygon, corners.min(axis=1))
-    np.maximum.at(hi, scene.triangle_polygon, corners.max(axis=1))
-    centre = 0.5 * (lo + hi)
-    dist = np.linalg.norm(corners - centre[scene.triangle_polygon][:, None, :], axis=2).max(axis=1)
-    radius = np.zeros(p)
-    np.maximum.at(radius, scene.triangle_polygon, dist)
-    return centre, radius
 
 
 def reflecting_polygons(scene: "Scene", skip_absorbers: bool) -> np.ndarray:

@@ -90,7 +90,7 @@ def mirror_reach(scene: "Scene", frame: "KellerFrame", compiled: bool = False) -
     """The :class:`MirrorReach` lists of the sources of ``frame``, for every polygon.
 
     The Keller-cone test of :func:`~wavepaths.search.diffraction.keller_cone_keep` against each polygon's bounding sphere
-    (:func:`~wavepaths.search.images.polygon_spheres`), with the margin :data:`REACH_SLACK`:
+    (:func:`~wavepaths.scene.polygon_shapes.polygon_spheres`), with the margin :data:`REACH_SLACK`:
     a source reaches the sphere at some point of its edge iff ``cos_a <= cos(max(theta_A -
     delta_A, 0))`` and ``cos_b >= cos(min(theta_B + delta_B, pi))``. ``compiled``: both passes
     (the lengths, then the lists) as parallel loops over polygons
