@@ -97,6 +97,30 @@ def diffraction_point_parameter(
         shape = e.shape
     if len(shape) == 1:  # one point pair: a 0-d result
         return diffraction_point_parameter(e[None], r[None], origin[None], direction[None]).reshape(())
+    with np.errstate(over="ignore", invalid="ignore"):  # the rows beyond the range are recomputed below
+        t, s = _point_parameter(e, r, origin, direction)
+    # rows beyond float64's range for the squares of the distances (coordinates above ~1e154
+    # overflow, below ~1e-154 underflow): again on coordinates scaled by a power of two, which
+    # is exact, so that any finite input gives the point (docs/stress.md)
+    if t.size and not (np.isfinite(t.sum()) and s.min() >= _SCALED_BELOW):  # (two passes, no temporaries)
+        rows = np.nonzero(~np.isfinite(t) | (s < _SCALED_BELOW))
+        big = np.maximum(np.maximum(np.abs(e[rows]).max(axis=-1), np.abs(r[rows]).max(axis=-1)),
+                         np.abs(origin[rows]).max(axis=-1))
+        # 2^-exponent of the largest coordinate (capped at 2^1000: subnormal inputs come up to ~1e-22)
+        k = np.ldexp(1.0, np.minimum(-np.frexp(np.where(np.isfinite(big) & (big > 0), big, 1.0))[1], 1000))[..., None]
+        t2, _ = _point_parameter(e[rows] * k, r[rows] * k, origin[rows] * k, direction[rows])
+        t[rows] = t2 / k[..., 0]
+    return t
+
+
+_SCALED_BELOW = 2.0**-460
+"""``d_e + d_r`` [m] below which :func:`diffraction_point_parameter` recomputes a row on scaled
+coordinates (the squares of distances near 2^-460 are near float64's subnormal range)."""
+
+
+def _point_parameter(e: np.ndarray, r: np.ndarray, origin: np.ndarray, direction: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`diffraction_point_parameter` on arrays of equal shapes (..., 3), and ``d_e + d_r``."""
     w = direction
     ve = np.subtract(e, origin, dtype=np.float64)
     vr = np.subtract(r, origin, dtype=np.float64)
@@ -124,9 +148,9 @@ def diffraction_point_parameter(
     s += dr  # d_e + d_r (d_e is not used again)
     if s.all():  # no row with both points on the line (NaN rows stay NaN, as before)
         t /= s
-        return t
+        return t, s
     ok = s > 0
-    return np.where(ok, t / np.where(ok, s, 1.0), 0.5 * (te + tr))
+    return np.where(ok, t / np.where(ok, s, 1.0), 0.5 * (te + tr)), s
 
 
 def diffraction_point_reduced(te: np.ndarray, de: np.ndarray, tr: np.ndarray, dr: np.ndarray) -> np.ndarray:
