@@ -107,8 +107,8 @@ def test_tolerance_travels_to_the_pool_and_gives_the_same_map(canyon, grid):
     """tolerance_db rides on the transmitter context's options: a pool of two processes drops
     the same diffracted contributions as this process does, tile for tile."""
     opts = OPTIONS.with_(tolerance_db=0.5)
-    here = coverage(canyon, [-60, 0, 10], grid, opts, settings=CoverageOptions(workers=1, tile_size=8))
-    pooled = coverage(canyon, [-60, 0, 10], grid, opts, settings=CoverageOptions(workers=2, tile_size=8))
+    here = coverage(canyon, [-60, 0, 10], grid, opts, settings=CoverageOptions(workers=1, tile_size=8, coherent=False))
+    pooled = coverage(canyon, [-60, 0, 10], grid, opts, settings=CoverageOptions(workers=2, tile_size=8, coherent=False))
     assert pooled.metadata["workers"] == "local pool of 2 processes"
     assert here.stats["tolerance_dropped_candidates"] == pooled.stats["tolerance_dropped_candidates"] > 0
     assert_same_map(pooled, here)

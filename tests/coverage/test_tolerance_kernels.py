@@ -175,7 +175,7 @@ def test_a_tolerance_map_is_the_same_with_and_without_the_compiled_kernels():
     scene = load_scene("street_canyon")
     grid = PlanarGrid(center=[-37.3, 2.2], size=[56, 50], cell_size=[7, 5], height=1.5)
     tx = [[-60, 0, 10], [-20, 4, 6]]
-    settings = CoverageOptions(workers=1, tile_size=32)
+    settings = CoverageOptions(workers=1, tile_size=32, coherent=False)
     maps = [coverage(scene, tx, grid, TraceOptions(tolerance_db=0.5, compiled=c), fields=FieldConfig(3.5e9),
                      settings=settings) for c in (True, False)]
     assert maps[0].stats["tolerance_dropped_candidates"] == maps[1].stats["tolerance_dropped_candidates"] > 0
@@ -196,7 +196,7 @@ def test_the_antennas_peak_amplitude_is_sampled_once_per_antenna_not_per_tile():
     scene = load_scene("street_canyon")
     grid = PlanarGrid(center=[0.3, 0.7], size=[80, 40], cell_size=4.0, height=1.5)
     cfg = FieldConfig(3.5e9, tx_antenna=Antenna("tr38901", "V"), rx_antenna=Antenna("dipole", "V"))
-    settings = CoverageOptions(workers=1, threads=1, tile_size=10)
+    settings = CoverageOptions(workers=1, threads=1, tile_size=10, coherent=False)
     peak_pattern_amplitude.cache_clear()
     m = coverage(scene, [[-60.0, 0.0, 10.0]], grid, TraceOptions(tolerance_db=0.5), fields=cfg, settings=settings)
     assert m.metadata["cells_traced"] > 7 * 10  # eight tiles or more

@@ -58,7 +58,7 @@ def test_a_split_coverage_tile_with_a_tolerance_keeps_its_receivers(monkeypatch,
     scene = load_scene("street_canyon")
     grid = PlanarGrid(center=[0.0, 0.0], height=1.5, size=[40.0, 16.0], cell_size=4.0)
     opts = TraceOptions(max_reflections=1, diffraction=True, diffraction_reflections=2, tolerance_db=0.5)
-    settings = CoverageOptions(workers=1)
+    settings = CoverageOptions(workers=1, coherent=False)
     cfg = FieldConfig(3.5e9)
     ref = coverage(scene, TX, grid, opts, fields=cfg, settings=settings)
     counts = _guard_counts(scene, grid.cell_centers().reshape(-1, 3), 2)

@@ -199,7 +199,8 @@ def run_diffraction_cost(quick: bool = False, repeats: int = 3, progress=print) 
     last = {}
 
     def runner(opts, key="map", n_threads=None):
-        settings = CoverageOptions(workers=1, threads=n_threads)
+        # (the power sum: the total tolerance_db bounds; the coherent sum costs the same)
+        settings = CoverageOptions(workers=1, threads=n_threads, coherent=False)
 
         def run():
             # one thread means one: tiles on the calling thread (threads=1) and, as the calling

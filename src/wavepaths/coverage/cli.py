@@ -146,14 +146,7 @@ def run(args) -> int:
     grid = _grid(args, scene)
     settings = CoverageOptions(tile_size=args.tile_size, coherent=not args.incoherent, workers=args.workers,
                                threads=args.threads, mask_inside=not args.keep_inside)
-    if args.tolerance_db is not None and not args.incoherent:
-        import warnings
-
-        from ..scene.model import WavepathsWarning
-
-        warnings.warn(f"--tolerance-db {args.tolerance_db:g} bounds the power sum (--incoherent); the coherent map "
-                      "drawn here can move by much more where paths cancel (8 dB in a cell of the README's example "
-                      "at 0.1 dB)", WavepathsWarning, stacklevel=2)
+    # (--tolerance-db on a coherent map is warned about by coverage() itself)
     tx = np.array(args.tx, dtype=float).reshape(-1, 3)
     client = _client(args.dask) if args.dask else None
     try:
