@@ -76,3 +76,24 @@ def test_coverage_reports_cell_centres_nanometres_from_an_edge():
         warnings.simplefilter("error")
         coverage(scene, tx, PlanarGrid(center=[0.25, 0.0], height=1e-3, size=[4.0, 3.0], cell_size=1.0), opts,
                  settings=settings, progress=False)
+
+
+def test_the_compiled_loop_equals_the_numpy_blocks(monkeypatch):
+    """Points scattered around the street canyon's edges, within a few margins of them: the
+    compiled loop and the numpy blocks find the same edges at the same distances, bit for bit."""
+    pytest.importorskip("numba")
+    import wavepaths.scene._numba as compiled
+
+    scene = load_scene("street_canyon")
+    m = polygon_margin_length(scene)
+    D = scene.dihedra
+    rng = np.random.default_rng(3)
+    k = rng.integers(0, len(D.length), 3000)
+    pts = D.origin[k] + rng.uniform(-0.1, 1.1, 3000)[:, None] * D.length[k, None] * D.direction[k] \
+        + rng.normal(size=(3000, 3)) * 2 * m
+    fast = points_near_edges(scene, pts)
+    monkeypatch.setattr(compiled, "points_near_segments", None)
+    slow = points_near_edges(scene, pts)
+    assert 100 < (fast[0] >= 0).sum() < 3000  # both kinds of points
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])

@@ -70,8 +70,9 @@ def points_near_edges(scene: Scene, points: np.ndarray, budget: int = BUDGET) ->
     reflection's boundary side: a review found the total field of a transmitter 0.3 to 30 nm
     from the built-in wedge's edge (a 125 m scene: the margin is 0.5 um) off by up to 25 dB,
     without a word. :func:`~wavepaths.search.trace.trace` reports such points. (points x
-    dihedra) distance tests, chunked, on coordinates recentred on the scene; skipped beyond
-    ``budget`` of them.
+    dihedra) distance tests on coordinates recentred on the scene, compiled when numba is
+    installed (:func:`wavepaths.scene._numba.points_near_segments`, the same arithmetic),
+    else in blocks of numpy arrays; skipped beyond ``budget`` of them.
 
     Returns
     -------
@@ -91,29 +92,27 @@ def points_near_edges(scene: Scene, points: np.ndarray, budget: int = BUDGET) ->
         return dihedron, distance
     margin = polygon_margin_length(scene)
     c = scene.center
-    P, O, U, L = points - c, D.origin - c, D.direction, D.length
-    ou, oo = np.einsum("ij,ij->i", O, U), np.einsum("ij,ij->i", O, O)
-    # squared distances by expansion, which loses about 1e-16 of the squared coordinates: a
-    # coarse filter with a slack far above that, then the exact distance of the pairs it keeps
-    coarse = (margin + 1e-6 * scene.diagonal) ** 2
-    step = max(1, (1 << 22) // d)
+    P, O = np.ascontiguousarray(points - c), np.ascontiguousarray(D.origin - c)
+    U, L = np.ascontiguousarray(D.direction, dtype=np.float64), np.ascontiguousarray(D.length, dtype=np.float64)
+    try:
+        from ..scene._numba import points_near_segments
+    except ImportError:
+        points_near_segments = None
+    if points_near_segments is not None:
+        points_near_segments(P, O, U, L, float(margin), dihedron, distance)
+        return dihedron, distance
+    # numpy: the same arithmetic over (points x dihedra) blocks small enough to stay in cache
+    step = max(1, (1 << 16) // d)
     for s in range(0, n, step):
-        p = P[s : s + step]
-        t = p @ U.T - ou[None, :]
-        tc = np.clip(t, 0.0, L[None, :])
-        d2 = np.einsum("ij,ij->i", p, p)[:, None] - 2.0 * (p @ O.T) + oo[None, :] - 2.0 * tc * t + tc * tc
-        i, k = np.nonzero(d2 <= coarse)
-        if len(i) == 0:
-            continue
-        w = p[i] - O[k]
-        along = np.clip(np.einsum("ij,ij->i", w, U[k]), 0.0, L[k])
-        e = np.linalg.norm(w - along[:, None] * U[k], axis=1)
-        ok = e <= margin
-        i, k, e = s + i[ok], k[ok], e[ok]
-        order = np.argsort(-e, kind="stable")  # the nearest written last: it wins
-        i, k, e = i[order], k[order], e[order]
-        closer = e < distance[i]
-        dihedron[i[closer]], distance[i[closer]] = k[closer], e[closer]
+        p = P[s : s + step, None, :]
+        w0, w1, w2 = p[..., 0] - O[:, 0], p[..., 1] - O[:, 1], p[..., 2] - O[:, 2]
+        t = np.minimum(np.maximum((w0 * U[:, 0] + w1 * U[:, 1]) + w2 * U[:, 2], 0.0), L)
+        e0, e1, e2 = w0 - t * U[:, 0], w1 - t * U[:, 1], w2 - t * U[:, 2]
+        e = np.sqrt((e0 * e0 + e1 * e1) + e2 * e2)
+        k = np.argmin(e, axis=1)  # the first of equal distances, as the compiled loop
+        best = e[np.arange(len(k)), k]
+        near = best <= margin
+        dihedron[s : s + step][near], distance[s : s + step][near] = k[near], best[near]
     return dihedron, distance
 
 
