@@ -138,3 +138,23 @@ def test_input_checks() -> None:
         halfplane_plane_wave(1.0, 1.0, 1.0, "TE")  # type: ignore[arg-type]
     with pytest.raises(WavepathsError, match="k_rho"):
         halfplane_plane_wave(-1.0, 1.0, 1.0, "soft")
+
+
+def test_angles_outside_the_free_space_are_refused():
+    """The Fresnel form and the series extend into the wedge with values that are no field (a
+    review got 1.56 from a soft wedge at phi = -0.5): refused, rounding (1e-9 rad) let through."""
+    import numpy as np
+    import pytest
+
+    from wavepaths.errors import WavepathsError
+    from wavepaths.exact.halfplane import halfplane_plane_wave
+    from wavepaths.exact.wedge import wedge_plane_wave
+
+    with pytest.raises(WavepathsError, match="phi"):
+        wedge_plane_wave(10.0, -0.5, 1.0, 1.5, "soft")
+    with pytest.raises(WavepathsError, match="phi_prime"):
+        wedge_plane_wave(10.0, 1.0, 1.5 * np.pi + 1e-6, 1.5, "hard")
+    with pytest.raises(WavepathsError, match="phi"):
+        halfplane_plane_wave(10.0, 2 * np.pi + 1e-3, 1.0, "soft")
+    assert abs(wedge_plane_wave(10.0, 1.5 * np.pi + 1e-12, 1.0, 1.5, "soft")) < 1e-9  # the face, to rounding
+    assert np.isfinite(halfplane_plane_wave(10.0, np.array([0.0, 2 * np.pi]), 1.0, "hard")).all()

@@ -73,4 +73,21 @@ def halfplane_plane_wave(
         raise WavepathsError("`k_rho`, `phi` and `phi_prime` must be finite")
     if np.any(kr < 0):
         raise WavepathsError("`k_rho` must be >= 0")
+    check_angles(p, pp, 2.0)
     return _big_u(kr, p - pp) + sign * _big_u(kr, p + pp)
+
+
+ANGLE_SLACK = 1e-9
+"""[rad] How far outside ``[0, n pi]`` an angle may lie (rounding) before the exact solutions
+refuse it."""
+
+
+def check_angles(phi: np.ndarray, phi_prime: np.ndarray, n: float) -> None:
+    """Refuse observer or source directions outside the free space ``[0, n pi]`` of the wedge
+    (the series and Fresnel forms extend beyond it, into the wedge, with values that are no
+    field: a review got 1.56 from ``wedge_plane_wave(10, -0.5, 1, 1.5, "soft")``)."""
+    top = n * np.pi + ANGLE_SLACK
+    for name, a in (("phi", phi), ("phi_prime", phi_prime)):
+        if a.size and (a.min() < -ANGLE_SLACK or a.max() > top):
+            raise WavepathsError(f"`{name}` must lie in [0, {n:g} pi] (the free space around the edge), got values "
+                                 f"from {a.min():.6g} to {a.max():.6g} rad")

@@ -21,7 +21,7 @@ from scipy.special import jv
 from wavepaths.em.sionna_compat import sionna_compat_coefficients
 from wavepaths.em.utd import keller_coefficients, kp_coefficients
 from wavepaths.errors import WavepathsError
-from wavepaths.exact.halfplane import Polarization, _sign_for
+from wavepaths.exact.halfplane import Polarization, _sign_for, check_angles
 
 __all__ = ["utd_wedge_total_field", "wedge_geometrical_optics", "wedge_plane_wave"]
 
@@ -111,6 +111,7 @@ def wedge_plane_wave(
         raise WavepathsError("`k_rho`, `phi` and `phi_prime` must be finite")
     if np.any(kr < 0):
         raise WavepathsError("`k_rho` must be >= 0")
+    check_angles(p, pp, n)
     flat = [a.ravel() for a in (kr, p, pp)]
     out = np.empty(flat[0].shape, dtype=np.complex128)
     chunk = max(1, min(_CHUNK, _BESSEL_BUDGET // _terms(float(kr.max(initial=0.0)), n)))
