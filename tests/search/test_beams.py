@@ -14,7 +14,8 @@ from wavepaths.search import beams as beams_mod
 from wavepaths.search.apertures import chain_beams_meet, polygon_quads, quad_side_planes
 from wavepaths.search.beams import beams_reaching, build_chain_beams, reflection_candidates
 from wavepaths.search.context import build_tx_context
-from wavepaths.search.images import backtrace, polygon_spheres
+from wavepaths.scene.polygon_shapes import polygon_spheres
+from wavepaths.search.images import backtrace
 
 from .test_completeness import free_point, random_scene
 

@@ -78,12 +78,10 @@ def test_coverage_reports_cell_centres_nanometres_from_an_edge():
                  settings=settings, progress=False)
 
 
-def test_the_compiled_loop_equals_the_numpy_blocks(monkeypatch):
-    """Points scattered around the street canyon's edges, within a few margins of them: the
-    compiled loop and the numpy blocks find the same edges at the same distances, bit for bit."""
-    pytest.importorskip("numba")
-    import wavepaths.scene._numba as compiled
-
+def test_the_plane_prefilter_finds_what_every_edge_tested_finds():
+    """Points scattered around the street canyon's edges, within a few margins of them, and far
+    from them: the plane prefilter and the exact distances to the candidates' edges give the
+    edges and distances that testing every edge finds (written out here)."""
     scene = load_scene("street_canyon")
     m = polygon_margin_length(scene)
     D = scene.dihedra
@@ -91,9 +89,28 @@ def test_the_compiled_loop_equals_the_numpy_blocks(monkeypatch):
     k = rng.integers(0, len(D.length), 3000)
     pts = D.origin[k] + rng.uniform(-0.1, 1.1, 3000)[:, None] * D.length[k, None] * D.direction[k] \
         + rng.normal(size=(3000, 3)) * 2 * m
-    fast = points_near_edges(scene, pts)
-    monkeypatch.setattr(compiled, "points_near_segments", None)
-    slow = points_near_edges(scene, pts)
-    assert 100 < (fast[0] >= 0).sum() < 3000  # both kinds of points
-    np.testing.assert_array_equal(fast[0], slow[0])
-    np.testing.assert_array_equal(fast[1], slow[1])
+    pts = np.concatenate([pts, rng.uniform(scene.bounds[0], scene.bounds[1], (500, 3))])
+    edge, dist = points_near_edges(scene, pts)
+    w = pts[:, None, :] - D.origin[None]
+    t = np.clip(np.einsum("nkj,kj->nk", w, D.direction), 0.0, D.length)
+    every = np.linalg.norm(w - t[..., None] * D.direction[None], axis=2)
+    best = every.min(axis=1)
+    near = best <= m
+    r = 1e-13 * scene.diagonal  # the coordinates' rounding (the function works recentred)
+    assert 100 < near.sum() < 3000  # both kinds of points
+    clear = np.abs(best - m) > r
+    np.testing.assert_array_equal((edge >= 0)[clear], near[clear])
+    both = near & (edge >= 0)
+    np.testing.assert_allclose(dist[both], best[both], rtol=0, atol=r)
+    np.testing.assert_allclose(every[np.nonzero(both)[0], edge[both]], best[both], rtol=0, atol=r)  # a nearest edge
+
+
+def test_a_reflection_only_trace_does_not_build_the_edges():
+    """Without diffraction the report is not made (the geometrical-optics field jumps at an
+    edge anyway), and a reflection-only trace does not build the scene's dihedra for it."""
+    scene = load_scene("wedge")
+    tx = np.array([[5.0, 0.0, 0.0]]) + 1e-8 * np.array([0.0, 1.0, 1.0]) / np.sqrt(2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        trace(scene, tx, RX, TraceOptions(max_reflections=1, diffraction=False))
+    assert "dihedra" not in scene.__dict__

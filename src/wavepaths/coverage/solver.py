@@ -464,10 +464,12 @@ def coverage(
         inside = np.zeros(len(flat), bool)
     timings["inside_s"] = time.perf_counter() - t
     active = np.nonzero(~inside)[0]
-    _warn_on_faces(scene, tx, np.empty((0, 3)))  # as trace() does: such a transmitter is on no side of its face
+    # as trace() does: such a transmitter is on no side of its face
+    _warn_on_faces(scene, tx, np.empty((0, 3)), edges=opts.diffraction)
     warn_cells_on_faces(scene, flat, active, faces[active], int((on_solid & inside).sum()))
-    near_edge = _cached(scene, "nearedge:" + grid_key, lambda: points_near_edges(scene, flat)[0])
-    warn_cells_near_edges(scene, flat, active[(near_edge[active] >= 0) & (faces[active] < 0)])
+    if opts.diffraction:
+        near_edge = _cached(scene, "nearedge:" + grid_key, lambda: points_near_edges(scene, flat)[0] >= 0)
+        warn_cells_near_edges(scene, flat, active[near_edge[active] & (faces[active] < 0)])
     _check_off_transmitters(scene, tx, flat, active, grid)
 
     t = time.perf_counter()

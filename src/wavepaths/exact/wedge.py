@@ -158,6 +158,7 @@ def wedge_geometrical_optics(
     """
     sign = _sign_for(polarization)
     kr, p, pp = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (k_rho, phi, phi_prime)))
+    check_angles(p, pp, float(n))
     # the boundary tests on the same floating-point offsets as the coefficients
     bm, bp = p - pp, p + pp
     w_inc = _go_weight(np.pi - np.abs(bm))

@@ -29,26 +29,3 @@ def points_in_polygons(points, polygons, ptr, polygon_tris, triangles, vertices,
                 break
     return out
 
-
-@numba.njit(cache=True, nogil=True)
-def points_near_segments(P, O, U, L, margin, edge, dist):
-    """The compiled twin of :func:`wavepaths.search.on_faces.points_near_edges`' loop: for each
-    point of ``P`` (n, 3), the nearest segment ``O + t U``, ``0 <= t <= L`` (d of them), within
-    ``margin``, written into ``edge`` (n,) and ``dist`` (n,) (left as given where none is). The
-    same arithmetic as the numpy loop, in the same order."""
-    for i in range(P.shape[0]):
-        p0, p1, p2 = P[i, 0], P[i, 1], P[i, 2]
-        best = margin
-        found = -1
-        for k in range(O.shape[0]):
-            w0, w1, w2 = p0 - O[k, 0], p1 - O[k, 1], p2 - O[k, 2]
-            t = (w0 * U[k, 0] + w1 * U[k, 1]) + w2 * U[k, 2]
-            t = min(max(t, 0.0), L[k])
-            e0, e1, e2 = w0 - t * U[k, 0], w1 - t * U[k, 1], w2 - t * U[k, 2]
-            d = np.sqrt((e0 * e0 + e1 * e1) + e2 * e2)
-            if d < best or (d == best and found < 0):
-                best = d
-                found = k
-        if found >= 0:
-            edge[i] = found
-            dist[i] = best

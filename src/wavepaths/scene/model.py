@@ -38,8 +38,8 @@ class _ValueLocks:
     """One re-entrant lock per cached value of one scene, made on first use.
 
     A lock per value, not one per scene: a value's computation may run threads that need
-    another value (never the same one, which would recurse). Pickled and copied as a fresh
-    set of locks.
+    another value (never the same one, which would recurse). Pickled and deep-copied as a
+    fresh set of locks (a shallow ``copy.copy`` of a scene shares them, and its values).
     """
 
     __slots__ = ("_guard", "_locks")
@@ -253,6 +253,8 @@ class Scene:
         -------
         The value kept for ``key``.
         """
+        if keep is not None and not (isinstance(key, tuple) and key):
+            raise WavepathsError(f"`keep` needs a tuple key whose first item names its kind, got {key!r}")
         store = self.__dict__.setdefault("_memo", {})
         try:
             return store[key]

@@ -101,7 +101,9 @@ def diffraction_point_parameter(
         t, s = _point_parameter(e, r, origin, direction)
     # rows beyond float64's range for the squares of the distances (coordinates above ~1e154
     # overflow, below ~1e-154 underflow): again on coordinates scaled by a power of two, which
-    # is exact, so that any finite input gives the point (docs/stress.md)
+    # is exact, so that coordinates of any finite magnitude give the point (docs/stress.md S23;
+    # the scale is the largest coordinate's, so ends 1e-165 m from the line of an edge 1 m away
+    # still underflow: the midpoint)
     if t.size and not (np.isfinite(t.sum()) and s.min() >= _SCALED_BELOW):  # (two passes, no temporaries)
         rows = np.nonzero(~np.isfinite(t) | (s < _SCALED_BELOW))
         big = np.maximum(np.maximum(np.abs(e[rows]).max(axis=-1), np.abs(r[rows]).max(axis=-1)),

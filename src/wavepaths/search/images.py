@@ -32,7 +32,6 @@ import numpy as np
 
 from ..errors import ImageTreeTooLarge, WavepathsError
 from ..scene.closed import points_inside_closed
-from ..scene.polygon_shapes import polygon_spheres  # re-exported: the spheres moved to the scene
 from .on_faces import points_on_surfaces
 from .spheres import NODE_ANGLE_SLACK, SphereTree, beam_meets_spheres, build_sphere_tree, query_tree, vector_angle
 from .geometry import mirror_points, segment_plane_intersection
@@ -370,7 +369,7 @@ def build_image_levels_all_pairs(
         return levels
     n = scene.polygon_normal
     d = scene.polygon_offset
-    centre, radius = polygon_spheres(scene)
+    centre, radius = scene.polygon_spheres
     mirrors = np.nonzero(reflecting_polygons(scene, skip_absorbers))[0]
     outward = scene.outward_sign
     inside = source_inside_objects(scene, sources)  # decided per source, never for the whole batch

@@ -69,10 +69,12 @@ def points_near_edges(scene: Scene, points: np.ndarray, budget: int = BUDGET) ->
     the edge, where the exact geometry has none, and the diffraction there then takes that
     reflection's boundary side: a review found the total field of a transmitter 0.3 to 30 nm
     from the built-in wedge's edge (a 125 m scene: the margin is 0.5 um) off by up to 25 dB,
-    without a word. :func:`~wavepaths.search.trace.trace` reports such points. (points x
-    dihedra) distance tests on coordinates recentred on the scene, compiled when numba is
-    installed (:func:`wavepaths.scene._numba.points_near_segments`, the same arithmetic),
-    else in blocks of numpy arrays; skipped beyond ``budget`` of them.
+    without a word. :func:`~wavepaths.search.trace.trace` reports such points.
+
+    A point that near an edge is that near the plane of each of the edge's faces: the
+    (points x polygons) plane distances, chunked as :func:`points_on_faces` takes them (and
+    skipped with it beyond ``budget``), give the few candidates, whose distances to their
+    polygons' edges (the dihedra on them) are then taken exactly.
 
     Returns
     -------
@@ -84,36 +86,44 @@ def points_near_edges(scene: Scene, points: np.ndarray, budget: int = BUDGET) ->
     from ..scene.polygon_query import polygon_margin_length
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = len(points)
+    n, p = len(points), scene.num_polygons
     dihedron, distance = np.full(n, -1, dtype=np.int64), np.full(n, np.inf)
-    D = scene.dihedra
-    d = len(D.length)
-    if n == 0 or d == 0 or n * d > budget:
+    if n == 0 or p == 0 or n * p > budget:
         return dihedron, distance
     margin = polygon_margin_length(scene)
-    c = scene.center
-    P, O = np.ascontiguousarray(points - c), np.ascontiguousarray(D.origin - c)
-    U, L = np.ascontiguousarray(D.direction, dtype=np.float64), np.ascontiguousarray(D.length, dtype=np.float64)
-    try:
-        from ..scene._numba import points_near_segments
-    except ImportError:
-        points_near_segments = None
-    if points_near_segments is not None:
-        points_near_segments(P, O, U, L, float(margin), dihedron, distance)
-        return dihedron, distance
-    # numpy: the same arithmetic over (points x dihedra) blocks small enough to stay in cache
-    step = max(1, (1 << 16) // d)
+    step = max(1, (1 << 22) // p)
+    rows, polys = [], []
     for s in range(0, n, step):
-        p = P[s : s + step, None, :]
-        w0, w1, w2 = p[..., 0] - O[:, 0], p[..., 1] - O[:, 1], p[..., 2] - O[:, 2]
-        t = np.minimum(np.maximum((w0 * U[:, 0] + w1 * U[:, 1]) + w2 * U[:, 2], 0.0), L)
-        e0, e1, e2 = w0 - t * U[:, 0], w1 - t * U[:, 1], w2 - t * U[:, 2]
-        e = np.sqrt((e0 * e0 + e1 * e1) + e2 * e2)
-        k = np.argmin(e, axis=1)  # the first of equal distances, as the compiled loop
-        best = e[np.arange(len(k)), k]
-        near = best <= margin
-        dihedron[s : s + step][near], distance[s : s + step][near] = k[near], best[near]
+        dist = np.abs(points[s : s + step] @ scene.polygon_normal.T - scene.polygon_offset[None, :])
+        i, q = np.nonzero(dist <= margin)
+        rows.append(s + i)
+        polys.append(q)
+    i, q = np.concatenate(rows), np.concatenate(polys)
+    if len(i) == 0:
+        return dihedron, distance
+    ptr, edges = scene.memo("polygon_dihedra", lambda: _polygon_dihedra(scene))
+    count = ptr[q + 1] - ptr[q]
+    i = np.repeat(i, count)
+    k = edges[np.repeat(ptr[q], count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))]
+    D = scene.dihedra
+    c = scene.center
+    w = (points[i] - c) - (D.origin[k] - c)
+    t = np.clip(np.einsum("ij,ij->i", w, D.direction[k]), 0.0, D.length[k])
+    e = np.linalg.norm(w - t[:, None] * D.direction[k], axis=1)
+    near = e <= margin
+    i, k, e = i[near], k[near], e[near]
+    order = np.lexsort((k, e))[::-1]  # the nearest (then the lowest dihedron) written last: it wins
+    dihedron[i[order]], distance[i[order]] = k[order], e[order]
     return dihedron, distance
+
+
+def _polygon_dihedra(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """CSR ``(ptr, dihedra)``: the dihedra (edges) on each polygon, each once."""
+    D = scene.dihedra
+    owner = np.repeat(np.arange(len(D.length)), np.diff(D.face_ptr))
+    pairs = np.unique(np.stack([D.face_polygon, owner], axis=1), axis=0)
+    ptr = np.searchsorted(pairs[:, 0], np.arange(scene.num_polygons + 1))
+    return ptr, pairs[:, 1].astype(np.int64)
 
 
 def points_on_surfaces(scene: Scene, points: np.ndarray, budget: int = BUDGET) -> np.ndarray:

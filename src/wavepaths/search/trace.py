@@ -103,10 +103,12 @@ def _warn_inside(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarr
 
 
 def _warn_on_faces(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.ndarray | None = None,
-                   rx_face: np.ndarray | None = None) -> None:
+                   rx_face: np.ndarray | None = None, edges: bool = True) -> None:
     """Report transmitters and receivers lying exactly on a face (see :func:`points_on_faces`,
-    whose results ``tx_face``, ``rx_face`` may be passed in), and those off the faces but
-    within the point-in-polygon margin of an edge (:func:`points_near_edges`)."""
+    whose results ``tx_face``, ``rx_face`` may be passed in), and, with ``edges`` (a search
+    with diffraction), those off the faces but within the point-in-polygon margin of an edge
+    (:func:`points_near_edges`: there the diffraction follows a reflection the margin may
+    accept; without diffraction the geometrical-optics field jumps at an edge anyway)."""
     import warnings
 
     from ..scene.model import WavepathsWarning
@@ -125,6 +127,8 @@ def _warn_on_faces(scene: Scene, tx: np.ndarray, rx: np.ndarray, tx_face: np.nda
                 WavepathsWarning,
                 stacklevel=3,
             )
+        if not edges:
+            continue
         edge, dist = points_near_edges(scene, pts)
         rows = np.nonzero((edge >= 0) & (face < 0))[0]
         if len(rows):
@@ -232,7 +236,7 @@ def trace(
         raise WavepathsError(f"transmitter {i} and receiver {j} are at the same position {tx[i].tolist()}")
     tx_face, rx_face = points_on_faces(scene, tx), points_on_faces(scene, rx)
     _warn_inside(scene, tx, rx, tx_face, rx_face)
-    _warn_on_faces(scene, tx, rx, tx_face, rx_face)
+    _warn_on_faces(scene, tx, rx, tx_face, rx_face, edges=opts.diffraction)
     if context is not None:
         _check_context(context, scene, tx, opts)
     ctx = context if context is not None else build_tx_context(scene, tx, opts)
