@@ -48,7 +48,7 @@ from .grid import Grid, MeshGrid, PlanarGrid
 from ..scene.solids import inside_solid_objects, solid_objects
 from .result import MECHANISMS, CoverageMap
 from .surfaces import cells_on_faces, outside_solids, warn_cells_near_edges, warn_cells_on_faces
-from .tolerance import tolerance_keep
+from .tolerance import tolerance_keep, warn_unbounded
 
 # result bytes per cell and transmitter: a_total (16) + a_sum (3 x 16) + power_sum (3 x 8)
 # + num_paths (3 x 4) + field_total (3 x 16) + field_power_sum (8), plus the derived dB maps
@@ -330,29 +330,6 @@ def _cached(scene: "Scene", key: str, make):
     return scene.memo((kind, grid), frozen, keep=INSIDE_CACHE_SIZE)
 
 
-def _warn_unbounded_pruning(opts: TraceOptions, cfg: FieldConfig) -> None:
-    """A :class:`~wavepaths.scene.WavepathsWarning` when ``prune_db`` prunes diffracted paths
-    (``prune_frequency_hz`` given) by a bound that does not hold for this map's fields: the UTD
-    bound holds at ``prune_frequency_hz`` and above, and not for Keller's GTD, whose
-    coefficient diverges at the boundaries (:attr:`TraceOptions.prune_db`). Only the map knows
-    both: :func:`wavepaths.trace` has no fields, :func:`wavepaths.compute_fields` no options."""
-    import warnings
-
-    from ..scene import WavepathsWarning
-
-    if opts.prune_db is None or opts.prune_frequency_hz is None or not opts.diffraction:
-        return
-    if cfg.model == "gtd":
-        warnings.warn(f"`prune_db` prunes diffracted paths by the UTD's bound, which does not hold for the "
-                      f"fields' model 'gtd': dropped paths may exceed -{opts.prune_db:g} dB", WavepathsWarning,
-                      stacklevel=3)
-    elif opts.prune_frequency_hz > cfg.frequency_hz:
-        warnings.warn(f"`prune_frequency_hz` ({opts.prune_frequency_hz:g} Hz) is above the map's frequency "
-                      f"({cfg.frequency_hz:g} Hz): the diffraction bound of `prune_db` holds only at that "
-                      f"frequency and above, so dropped paths may exceed -{opts.prune_db:g} dB", WavepathsWarning,
-                      stacklevel=3)
-
-
 def coverage(
     scene: Scene,
     tx: ArrayLike,
@@ -412,16 +389,7 @@ def coverage(
             raise WavepathsError(f"`tolerance_db` needs the UTD model (its bound does not hold for {cfg.model!r})")
         # the diffraction bound needs the frequency, which the map knows (so does prune_db then)
         opts = opts.with_(prune_frequency_hz=cfg.frequency_hz)
-        if cov.coherent:
-            import warnings
-
-            from ..scene import WavepathsWarning
-
-            warnings.warn(f"`tolerance_db` ({opts.tolerance_db:g} dB, --tolerance-db) bounds the power sum (--incoherent), "
-                          "the total of `CoverageOptions(coherent=False)`; the coherent total, this map's default, can "
-                          "move by much more where paths cancel (a review measured 10.8 dB in a cell of the street "
-                          "canyon at 0.1 dB, 26 dB at 1 dB)", WavepathsWarning, stacklevel=2)
-    _warn_unbounded_pruning(opts, cfg)
+    warn_unbounded(opts, cfg, cov.coherent)
     tx = check_positions("tx", tx)
     cfg.check_materials(scene)  # fail before tracing, not in a worker
     m = len(tx)

@@ -182,26 +182,6 @@ BOUNDARY_EPS = 1e-12  # [rad] an observer this close to a shadow/reflection boun
 BOUNDARY_NUDGE = 1e-9  # [rad] the side it is moved to, matching the geometrical-optics decision
 
 
-def boundary_margin(scene: "Scene") -> float:
-    """[m] How close to an edge a geometrical-optics (GO) ray may pass with the search's
-    decision on it still open to its tolerances: ``4 POLYGON_MARGIN`` of the scene's size
-    (:func:`~wavepaths.scene.polygon_query.polygon_margin_length`).
-
-    The search decides each GO path in float64: occlusion exactly (to ``1e-12`` of the size,
-    the float64 tree or Embree's float32 hits confirmed in float64, the pairs grazing an edge
-    re-cast), a reflection point inside its face up to the barycentric margin
-    :data:`~wavepaths.scene.polygon_query.POLYGON_MARGIN` (a point on the border, to
-    rounding, is inside), which is at most that fraction of the size in metres. Beyond this
-    margin the float64 angles and the search agree, and :func:`_on_boundary_sides` leaves the
-    angles alone: a GO path missing for another reason (another object blocking the line of
-    sight) is no sign that the observer is on the shadow side. (It was ``4 ray_offset``, a
-    float32 budget a thousand times larger, from when casts were decided in float32: an
-    object blocking the line of sight 0.05 rad inside that margin moved the diffraction onto
-    the boundary and flipped its sign.)
-    """
-    return polygon_margin_length(scene)
-
-
 def _path_keys(paths: Paths, pairs: np.ndarray) -> set:
     """(tx, rx, interaction sequence) of the paths between the (tx, rx) ``pairs`` (k, 2) only:
     the few pairs with a path near a boundary, not every path of the batch."""
@@ -220,19 +200,28 @@ def _on_boundary_sides(scene: "Scene", paths: Paths, rows: np.ndarray, j: int, g
 
     The UTD term of a boundary switches sign across it, by the float64 angles; the
     geometrical-optics (GO) path is kept or dropped by the search, whose decisions within
-    :func:`boundary_margin` of the edge (point-in-polygon margins) may fall on the other
-    side. Exactly on a boundary the UTD singular term is the mean of its one-sided limits
-    and needs a GO weight of 1/2 that the search cannot give. So when the GO ray passes
-    within :func:`boundary_margin` of the edge, the diffraction term takes the
+    :func:`~wavepaths.scene.polygon_query.polygon_margin_length` of the edge may fall on the
+    other side. Exactly on a boundary the UTD singular term is the mean of its one-sided
+    limits and needs a GO weight of 1/2 that the search cannot give. So when the GO ray
+    passes within that margin of the edge, the diffraction term takes the
     one-sided limit of the side the search chose: the lit side when the GO path (the line
     of sight for the incident shadow boundary, the reflection on the 0- or n-face for a
     reflection boundary) is among the paths, else the shadow side. The total field is
     then continuous, and exact on the boundary (a grazing perfectly conducting screen with
     both ends 1,000 wavelengths away: 6.06 dB below free space soft, 5.98 dB hard; 6.02 dB
     is the absorbing screen's).
+
+    The margin: the search decides each GO path in float64, occlusion exactly (to 1e-12 of
+    the size) and a reflection point inside its face up to the barycentric
+    :data:`~wavepaths.scene.polygon_query.POLYGON_MARGIN`, at most 4e-9 of the size in metres.
+    Beyond it the float64 angles and the search agree, and the angles are left alone: a GO
+    path missing for another reason (another object blocking the line of sight) is no sign
+    that the observer is on the shadow side. (It was ``4 ray_offset``, a float32 budget a
+    thousand times larger: an object blocking the line of sight 0.05 rad inside it moved the
+    diffraction onto the boundary and flipped its sign; docs/stress.md, S21.)
     """
     phi, pp, n = g["phi"], g["phi_prime"], g["n"]
-    margin = np.maximum(boundary_margin(scene) / np.maximum(legs, 1e-300), BOUNDARY_EPS)
+    margin = np.maximum(polygon_margin_length(scene) / np.maximum(legs, 1e-300), BOUNDARY_EPS)
     sb = np.abs(phi - pp) - np.pi
     rb0 = phi + pp - np.pi
     rbn = phi + pp - (2 * n - 1) * np.pi
@@ -387,7 +376,7 @@ def _path_field_vectors_compiled(scene: "Scene", paths: Paths, cfg: FieldConfig)
            seg, np.ascontiguousarray(kinds), np.ascontiguousarray(paths.primitive, dtype=np.int64),
            np.ascontiguousarray(paths.wedge_faces, dtype=np.int64), scene.polygon_normal, scene.polygon_material,
            dih.direction, dih.face_direction, face_material, *tables, cfg.reflection_model == "slab",
-           float(cfg.wavenumber), SIN_BETA_0_FLOOR, boundary_margin(scene), BOUNDARY_EPS)
+           float(cfg.wavenumber), SIN_BETA_0_FLOOR, polygon_margin_length(scene), BOUNDARY_EPS)
     if deferred.any():
         # the numpy chain for the paths of the pairs concerned (it looks for their
         # geometrical-optics paths among them), then the deferred rows taken from it

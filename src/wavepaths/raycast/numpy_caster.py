@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._ragged import ranks
 from .._vec import dot3
 from . import canonical, plane_tolerance
 
@@ -391,7 +392,7 @@ class TriangleGrid:
         w = i1 - i0 + 1
         count = w.prod(axis=1)
         box = np.repeat(np.arange(len(w)), count)
-        o = _ranks(count)
+        o = ranks(count)
         wy, wz = w[box, 1], w[box, 2]
         i = i0[box, 0] + o // (wy * wz)
         j = i0[box, 1] + (o // wz) % wy
@@ -424,7 +425,7 @@ class TriangleGrid:
         for s in range(0, len(seg), step):
             sel = seg[s : s + step]
             slabs = np.clip(walk.slabs[sel] - start, 0, count)
-            cell_seg, cell = self._slab_cells(walk, np.repeat(sel, slabs), start + _ranks(slabs))
+            cell_seg, cell = self._slab_cells(walk, np.repeat(sel, slabs), start + ranks(slabs))
             for pos, tri in self._cell_triangles(cell, budget):
                 yield cell_seg[pos], tri
 
@@ -465,13 +466,8 @@ class TriangleGrid:
         while lo < len(cell):
             hi = max(int(np.searchsorted(ends, ends[lo] - count[lo] + budget, side="right")), lo + 1)
             pos = np.repeat(np.arange(lo, hi), count[lo:hi])
-            yield pos, self.cell_triangles[start[pos] + _ranks(count[lo:hi])]
+            yield pos, self.cell_triangles[start[pos] + ranks(count[lo:hi])]
             lo = hi
-
-
-def _ranks(count: np.ndarray) -> np.ndarray:
-    """``0 .. count[i] - 1`` for each ``i``, concatenated."""
-    return np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
 
 
 def _cell_size(extent: np.ndarray, cells: float) -> np.ndarray:

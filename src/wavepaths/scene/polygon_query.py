@@ -54,7 +54,7 @@ def polygon_margin_length(scene: "Scene") -> float:
     border no point is taken for inside it by :func:`points_in_polygons` (a barycentric
     margin is at most that fraction of the triangle's size, which is at most the scene's).
     Closer to an edge, a reflection point just beyond the edge may be accepted: the UTD
-    boundary side follows the search within it (:func:`wavepaths.fields.chain.boundary_margin`),
+    boundary side follows the search within it (:func:`wavepaths.fields.chain._on_boundary_sides`),
     and an end point this close to an edge is reported
     (:func:`wavepaths.search.on_faces.points_near_edges`)."""
     return 4 * POLYGON_MARGIN * scene.diagonal

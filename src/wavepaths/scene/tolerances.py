@@ -70,7 +70,7 @@ class SceneTolerances:
         decided in float64, :mod:`wavepaths.raycast`); the value sets how close to an edge
         a geometrical-optics ray counts as grazing: within ``4 ray_offset`` its (tx, rx)
         pair is re-cast in float64. (The UTD boundary side follows the search's decision
-        within the much smaller :func:`wavepaths.fields.chain.boundary_margin`.)
+        within the much smaller :func:`wavepaths.scene.polygon_query.polygon_margin_length`.)
     """
 
     weld: float = 1e-6

@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
+from .._ragged import ranks
 from ..errors import WavepathsError
 from .chains import occluded_chains
 from .images import backtrace
@@ -230,7 +231,7 @@ def _window_samples(scene: "Scene", ctx: "TxContext", a: int, lv, src, pr: np.nd
     spacing = np.maximum(options.spacing, options.angular * dist)
     count = np.ceil((hi - lo) / spacing).astype(np.int64) + 1
     row = np.repeat(np.arange(len(d)), count)
-    j = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
+    j = ranks(count)
     frac = np.where(count[row] > 1, j / np.maximum(count[row] - 1, 1), 0.5)
     # the end samples stand just inside the window: an end the visibility march stopped at
     # lies on a face's shadow boundary (within its margins), where the segment from the

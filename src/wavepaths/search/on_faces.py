@@ -14,9 +14,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._ragged import ranks
 from ..scene.model import Scene
 
 BUDGET = 50_000_000  # (points x polygons) distance tests; beyond it nothing is reported on a face
+
+
+def _near_planes(scene: Scene, points: np.ndarray, tol: float, budget: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(point, polygon)`` index pairs of every point within ``tol`` [m] of a polygon's plane:
+    (points x polygons) distances, in chunks of about 4 M; none beyond ``budget`` of them."""
+    n, p = len(points), scene.num_polygons
+    z = np.zeros(0, np.int64)
+    if n == 0 or p == 0 or n * p > budget:
+        return z, z
+    step = max(1, (1 << 22) // p)
+    rows, polys = [z], [z]
+    for s in range(0, n, step):
+        dist = np.abs(points[s : s + step] @ scene.polygon_normal.T - scene.polygon_offset[None, :])
+        i, q = np.nonzero(dist <= tol)
+        rows.append(s + i)
+        polys.append(q)
+    return np.concatenate(rows), np.concatenate(polys)
 
 
 def _on_face_pairs(scene: Scene, points: np.ndarray, budget: int) -> tuple[np.ndarray, np.ndarray]:
@@ -24,26 +42,11 @@ def _on_face_pairs(scene: Scene, points: np.ndarray, budget: int) -> tuple[np.nd
     from ..raycast import plane_tolerance
     from ..scene.polygon_query import points_in_polygons
 
-    n, p = len(points), scene.num_polygons
-    if n == 0 or p == 0 or n * p > budget:
-        z = np.zeros(0, np.int64)
-        return z, z
-    tol = plane_tolerance(scene)
-    step = max(1, (1 << 22) // p)
-    rows, polys = [], []
-    for s in range(0, n, step):
-        pts = points[s : s + step]
-        dist = np.abs(pts @ scene.polygon_normal.T - scene.polygon_offset[None, :])
-        i, q = np.nonzero(dist <= tol)
-        if len(i) == 0:
-            continue
-        on = points_in_polygons(scene, pts[i], q)
-        rows.append(s + i[on])
-        polys.append(q[on])
-    if not rows:
-        z = np.zeros(0, np.int64)
-        return z, z
-    return np.concatenate(rows), np.concatenate(polys)
+    i, q = _near_planes(scene, points, plane_tolerance(scene), budget)
+    if len(i) == 0:
+        return i, q
+    on = points_in_polygons(scene, points[i], q)
+    return i[on], q[on]
 
 
 def points_on_faces(scene: Scene, points: np.ndarray, budget: int = BUDGET) -> np.ndarray:
@@ -86,28 +89,17 @@ def points_near_edges(scene: Scene, points: np.ndarray, budget: int = BUDGET) ->
     from ..scene.polygon_query import polygon_margin_length
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n, p = len(points), scene.num_polygons
-    dihedron, distance = np.full(n, -1, dtype=np.int64), np.full(n, np.inf)
-    if n == 0 or p == 0 or n * p > budget:
-        return dihedron, distance
+    dihedron, distance = np.full(len(points), -1, dtype=np.int64), np.full(len(points), np.inf)
     margin = polygon_margin_length(scene)
-    step = max(1, (1 << 22) // p)
-    rows, polys = [], []
-    for s in range(0, n, step):
-        dist = np.abs(points[s : s + step] @ scene.polygon_normal.T - scene.polygon_offset[None, :])
-        i, q = np.nonzero(dist <= margin)
-        rows.append(s + i)
-        polys.append(q)
-    i, q = np.concatenate(rows), np.concatenate(polys)
+    i, q = _near_planes(scene, points, margin, budget)
     if len(i) == 0:
         return dihedron, distance
     ptr, edges = scene.memo("polygon_dihedra", lambda: _polygon_dihedra(scene))
     count = ptr[q + 1] - ptr[q]
     i = np.repeat(i, count)
-    k = edges[np.repeat(ptr[q], count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))]
+    k = edges[np.repeat(ptr[q], count) + ranks(count)]
     D = scene.dihedra
-    c = scene.center
-    w = (points[i] - c) - (D.origin[k] - c)
+    w = points[i] - D.origin[k]
     t = np.clip(np.einsum("ij,ij->i", w, D.direction[k]), 0.0, D.length[k])
     e = np.linalg.norm(w - t[:, None] * D.direction[k], axis=1)
     near = e <= margin

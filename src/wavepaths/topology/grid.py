@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._ragged import ranks
+
 
 def grid_index(lo: np.ndarray, hi: np.ndarray, cells_per_axis: int = 256) -> tuple:
     """A uniform 2-D grid over the boxes' two widest axes, each box registered in every cell its
@@ -25,7 +27,7 @@ def grid_index(lo: np.ndarray, hi: np.ndarray, cells_per_axis: int = 256) -> tup
     cy = b1[:, 1] - b0[:, 1] + 1
     count = cx * cy
     box = np.repeat(np.arange(len(lo)), count)
-    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    k = ranks(count)
     gx = b0[box, 0] + k % cx[box]
     gy = b0[box, 1] + k // cx[box]
     cell = gx * ny + gy
